@@ -1,0 +1,176 @@
+"""Configuration: one TOML file validated by pydantic, then ``--set section.key=value`` overrides.
+
+Every key has a default in ``config/default.toml`` and in the models below (the two are kept
+equal by a test). Errors name the key and the reason and are raised as ``ConfigError``.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Sequence
+from enum import StrEnum
+from pathlib import Path
+from typing import Any, Self
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from service.errors import ConfigError
+
+DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "config" / "default.toml"
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+
+class VehicleConfig(_Section):
+    id: str = Field(default="oslim-1", min_length=1, pattern=r"^[A-Za-z0-9_\-]+$")
+
+
+class MavlinkConfig(_Section):
+    url: str = Field(default="udpin:0.0.0.0:14550", min_length=1)
+    guided_mode: int = Field(default=15, ge=0)
+    link_timeout_s: float = Field(default=3.0, gt=0)
+    setpoint_rate_hz: float = Field(default=2.0, ge=2.0, le=50.0)
+    altitude_m: float = 0.0
+
+
+class AreaConfig(_Section):
+    x_min: float = 0.0
+    x_max: float = 100.0
+    y_min: float = -50.0
+    y_max: float = 50.0
+    columns: int = Field(default=40, gt=0, le=10_000)
+    rows: int = Field(default=25, gt=0, le=10_000)
+    obstacles: list[tuple[float, float, float, float]] = Field(default_factory=list)
+
+    @field_validator("obstacles", mode="before")
+    @classmethod
+    def _lists_to_tuples(cls, value: Any) -> Any:
+        if isinstance(value, list):
+            return [tuple(v) if isinstance(v, list) else v for v in value]
+        return value
+
+    @model_validator(mode="after")
+    def _check_bounds(self) -> Self:
+        if not self.x_min < self.x_max:
+            raise ValueError(f"x_min ({self.x_min}) must be less than x_max ({self.x_max})")
+        if not self.y_min < self.y_max:
+            raise ValueError(f"y_min ({self.y_min}) must be less than y_max ({self.y_max})")
+        for k, (x0, y0, x1, y1) in enumerate(self.obstacles):
+            if not (x0 < x1 and y0 < y1):
+                raise ValueError(f"obstacles[{k}] must be [x_min, y_min, x_max, y_max] with min < max")
+        return self
+
+
+class SensorConfig(_Section):
+    name: str = Field(default="CHEM", min_length=1, max_length=10)
+    threshold: float = Field(default=1.0, ge=0)
+    detection_probability: float = Field(default=0.9, gt=0, le=1)
+    false_alarm_probability: float = Field(default=0.001, ge=0, lt=1)
+
+
+class MappingMethod(StrEnum):
+    HMM = "hmm"
+    BAYES = "bayes"
+    POMDP = "pomdp"
+
+
+class MappingConfig(_Section):
+    method: MappingMethod = Field(default=MappingMethod.POMDP, strict=False)
+    window: int = Field(default=50, gt=0, le=10_000)
+    sigma_x: float = Field(default=1.0, gt=0)
+    sigma_y: float = Field(default=1.0, gt=0)
+    epsilon_d: float = Field(default=0.2, gt=0, lt=1)
+    epsilon_c: float = Field(default=0.02, gt=0, lt=1)
+    tick_s: float = Field(default=1.0, gt=0, le=60)
+
+
+class PlanningConfig(_Section):
+    method: str = Field(default="astar", min_length=1)
+
+
+class ZenohConfig(_Section):
+    mode: str = Field(default="peer", pattern=r"^(peer|client|router)$")
+    connect: list[str] = Field(default_factory=list)
+    listen: list[str] = Field(default_factory=list)
+    key_prefix: str = Field(default="oslim", min_length=1)
+
+
+class RecorderConfig(_Section):
+    dir: str = Field(default="runs", min_length=1)
+
+
+class Config(_Section):
+    vehicle: VehicleConfig = Field(default_factory=VehicleConfig)
+    mavlink: MavlinkConfig = Field(default_factory=MavlinkConfig)
+    area: AreaConfig = Field(default_factory=AreaConfig)
+    sensor: SensorConfig = Field(default_factory=SensorConfig)
+    mapping: MappingConfig = Field(default_factory=MappingConfig)
+    planning: PlanningConfig = Field(default_factory=PlanningConfig)
+    zenoh: ZenohConfig = Field(default_factory=ZenohConfig)
+    recorder: RecorderConfig = Field(default_factory=RecorderConfig)
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """Split ``section.key=value``; the value is read as a TOML value, else kept as a string."""
+    key, sep, raw = text.partition("=")
+    path = key.strip().split(".")
+    if not sep or len(path) < 2 or not all(path):
+        raise ConfigError(f"--set {text!r}: expected section.key=value")
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    return path, value
+
+
+def _apply(data: dict[str, Any], path: list[str], value: Any) -> None:
+    node = data
+    for part in path[:-1]:
+        child = node.setdefault(part, {})
+        if not isinstance(child, dict):
+            raise ConfigError(f"--set {'.'.join(path)}: {part} is not a section")
+        node = child
+    node[path[-1]] = value
+
+
+def _format(error: ValidationError, origin: str) -> str:
+    lines = []
+    for item in error.errors():
+        loc = ".".join(str(p) for p in item["loc"]) or "(top level)"
+        reason = item["msg"]
+        if item["type"] == "extra_forbidden":
+            reason = "unknown key"
+        got = item.get("input")
+        shown = "" if isinstance(got, dict) or item["type"] == "extra_forbidden" else f" (got {got!r})"
+        lines.append(f"{origin}: {loc}: {reason}{shown}")
+    return "\n".join(lines)
+
+
+def build_config(data: dict[str, Any], overrides: Sequence[str] = (), origin: str = "config") -> Config:
+    """Validate a parsed TOML mapping after applying ``--set`` overrides."""
+    merged = {k: dict(v) if isinstance(v, dict) else v for k, v in data.items()}
+    for text in overrides:
+        path, value = parse_override(text)
+        _apply(merged, path, value)
+    try:
+        return Config.model_validate(merged)
+    except ValidationError as exc:
+        raise ConfigError(_format(exc, origin)) from None
+
+
+def load_config(path: str | Path | None = None, overrides: Sequence[str] = ()) -> Config:
+    """Load ``path`` (default: ``config/default.toml``), apply overrides, validate."""
+    file = Path(path) if path is not None else DEFAULT_CONFIG
+    try:
+        text = file.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{file}: no such configuration file") from None
+    except OSError as exc:
+        raise ConfigError(f"{file}: cannot read ({exc.strerror})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{file}: not valid TOML: {exc}") from None
+    return build_config(data, overrides, origin=str(file))

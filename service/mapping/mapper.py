@@ -1,0 +1,172 @@
+"""The one interface every source mapper implements, and what all of them share.
+
+A mapper consumes one ``Observation`` per tick. The tick's mean flow and duration give the
+transition A(t) of the interval that just ended (seed hmm-plume-mapping App. II); it goes into a
+bounded flow history and advances the plume likelihood alpha (Table I, eq. 11) for the current
+source map. If the vehicle is inside the area, the detection or non-detection is then fused into
+the source map by the method's own rule (``_assimilate``).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections import deque
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+from service.mapping.belief import FloatArray, entropy_nats
+from service.transport import Transition, transition
+
+if TYPE_CHECKING:
+    from service.config import Config
+    from service.grid import Grid
+    from service.observation import Observation
+
+
+@dataclass(frozen=True)
+class MapperParams:
+    """Model parameters shared by the mappers (units in the names or docs)."""
+
+    window: int = 50
+    """Flow-history window in ticks (beta-bar, Bayesian release times, POMDP h)."""
+    sigma_x: float = 1.0
+    """Random-walk spreading of a filament along x, m / sqrt(s) (seed reactive-planning eq. 1)."""
+    sigma_y: float = 1.0
+    mu: float = 0.9
+    """P(detect | detectable odour in the cell): the papers' mu."""
+    false_alarm: float = 0.001
+    """P(detect | no odour): keeps a single spurious hit from zeroing the true cell."""
+    epsilon_d: float = 0.2
+    """HMM pi adaptation gain on a detection (seed hmm-plume-mapping §IV-B1)."""
+    epsilon_c: float = 0.02
+    """HMM pi adaptation gain on a non-detection."""
+    tick_s: float = 1.0
+    """Nominal tick, used as dt for the first observation."""
+
+    def __post_init__(self) -> None:
+        if self.window < 1:
+            raise ValueError(f"window must be >= 1, got {self.window}")
+        if not (0 < self.mu <= 1 and 0 <= self.false_alarm < 1):
+            raise ValueError(f"need 0 < mu <= 1 and 0 <= false_alarm < 1, got {self.mu}, {self.false_alarm}")
+        if not (0 < self.epsilon_d < 1 and 0 < self.epsilon_c < 1):
+            raise ValueError("epsilon_d and epsilon_c must be in (0, 1)")
+
+    @classmethod
+    def from_config(cls, config: Config) -> MapperParams:
+        m, s = config.mapping, config.sensor
+        return cls(
+            window=m.window,
+            sigma_x=m.sigma_x,
+            sigma_y=m.sigma_y,
+            mu=s.detection_probability,
+            false_alarm=s.false_alarm_probability,
+            epsilon_d=m.epsilon_d,
+            epsilon_c=m.epsilon_c,
+            tick_s=m.tick_s,
+        )
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The mapper's best source cell: the papers' 1-based number, its centre and probability."""
+
+    cell: int
+    x: float
+    y: float
+    probability: float
+    entropy: float
+
+
+@dataclass(frozen=True)
+class FlowStep:
+    """One tick of the flow history: its operator and the displacement u dt it carried."""
+
+    transition: Transition
+    dx_m: float
+    dy_m: float
+    dt_s: float
+
+
+class SourceMapper(ABC):
+    """Online source likelihood map over a grid (OSLIM)."""
+
+    name: ClassVar[str]
+
+    def __init__(self, grid: Grid, params: MapperParams | None = None) -> None:
+        self.grid = grid
+        self.params = params or MapperParams()
+        n_cells = grid.size
+        self._pi: FloatArray = np.full(grid.shape, 1.0 / n_cells)
+        self._alpha: FloatArray = self._pi.copy()
+        self._ticks = 0
+        self._last_time: float | None = None
+        self.history: deque[FlowStep] = deque(maxlen=self.params.window)
+        self.ignored: dict[str, int] = {}
+
+    @property
+    def likelihood(self) -> FloatArray:
+        """The source likelihood map pi, shape (n, m), non-negative, summing to 1 (read-only view)."""
+        view = self._pi.view()
+        view.setflags(write=False)
+        return view
+
+    @property
+    def plume(self) -> FloatArray:
+        """The plume likelihood alpha for the current pi (Table I, eq. 11), shape (n, m)."""
+        view = self._alpha.view()
+        view.setflags(write=False)
+        return view
+
+    def estimate(self) -> Estimate:
+        flat = int(np.argmax(self._pi))
+        x, y = self.grid.centre(flat)
+        return Estimate(
+            cell=self.grid.paper_number(flat),
+            x=x,
+            y=y,
+            probability=float(self._pi.flat[flat]),
+            entropy=self.entropy(),
+        )
+
+    def entropy(self) -> float:
+        """Entropy of pi in nats."""
+        return entropy_nats(self._pi)
+
+    def update(self, obs: Observation) -> bool:
+        """Fuse one tick; returns False (and counts why) when the observation was not used."""
+        if self._last_time is None:
+            dt = self.params.tick_s
+        else:
+            dt = obs.time_s - self._last_time
+            if dt <= 0.0:
+                self._ignore("time_not_increasing")
+                return False
+        step = transition(self.grid, obs.flow_x, obs.flow_y, dt, self.params.sigma_x, self.params.sigma_y)
+        first = self._last_time is None
+        self._last_time = obs.time_s
+        if not first:
+            self.history.append(FlowStep(step, obs.flow_x * dt, obs.flow_y * dt, dt))
+            self._ticks += 1
+            # eq. 11: alpha(t_n) = (pi + n alpha(t_n-1) A(t_n-1)) / (n + 1)
+            n = self._ticks
+            self._alpha = (self._pi + n * step.push(self._alpha)) / (n + 1)
+        if not self.grid.contains(obs.x, obs.y):
+            self._ignore("outside_area")
+            return False
+        self._assimilate(self.grid.cell_of(obs.x, obs.y), obs.detected)
+        return True
+
+    def _ignore(self, reason: str) -> None:
+        self.ignored[reason] = self.ignored.get(reason, 0) + 1
+
+    @abstractmethod
+    def _assimilate(self, cell: int, detected: bool) -> None:
+        """Fuse a detection (or non-detection) in flat cell ``cell`` at the latest tick into pi."""
+
+    @abstractmethod
+    def detection_likelihood(self, cell: int) -> FloatArray:
+        """P(detection in flat cell ``cell`` now | source in each cell), shape (n, m), per this
+        mapper's own model and the current flow history. Planners (infotaxis) use it to predict
+        the outcome of visiting ``cell``."""
