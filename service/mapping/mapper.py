@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 
 from service.mapping.belief import FloatArray, entropy_nats
+from service.mapping.plume import advance_plume
 from service.transport import Transition, transition
 
 if TYPE_CHECKING:
@@ -149,9 +150,7 @@ class SourceMapper(ABC):
         if not first:
             self.history.append(FlowStep(step, obs.flow_x * dt, obs.flow_y * dt, dt))
             self._ticks += 1
-            # eq. 11: alpha(t_n) = (pi + n alpha(t_n-1) A(t_n-1)) / (n + 1)
-            n = self._ticks
-            self._alpha = (self._pi + n * step.push(self._alpha)) / (n + 1)
+            self._alpha = advance_plume(self._alpha, self._pi, step, self._ticks)
         if not self.grid.contains(obs.x, obs.y):
             self._ignore("outside_area")
             return False
