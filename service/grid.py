@@ -98,12 +98,12 @@ class Grid:
     @cached_property
     def x_centres(self) -> npt.NDArray[np.float64]:
         """Cell-centre x of each column, shape (m,)."""
-        return self.x_min + (np.arange(self.columns) + 0.5) * self.cell_width_m
+        return np.asarray(self.x_min + (np.arange(self.columns) + 0.5) * self.cell_width_m, dtype=np.float64)
 
     @cached_property
     def y_centres(self) -> npt.NDArray[np.float64]:
         """Cell-centre y of each row, shape (n,)."""
-        return self.y_min + (np.arange(self.rows) + 0.5) * self.cell_height_m
+        return np.asarray(self.y_min + (np.arange(self.rows) + 0.5) * self.cell_height_m, dtype=np.float64)
 
     def contains(self, x: float, y: float) -> bool:
         """True when (x, y) lies in the closed search rectangle."""
