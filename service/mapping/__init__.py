@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from service.mapping.bayes import BayesMapper
 from service.mapping.hmm import HmmMapper
 from service.mapping.mapper import Estimate, MapperParams, SourceMapper
+from service.mapping.pomdp import PomdpMapper
 
 if TYPE_CHECKING:
     from service.config import Config
@@ -13,6 +15,8 @@ if TYPE_CHECKING:
 
 MAPPERS: dict[str, type[SourceMapper]] = {
     HmmMapper.name: HmmMapper,
+    BayesMapper.name: BayesMapper,
+    PomdpMapper.name: PomdpMapper,
 }
 
 

@@ -1,0 +1,96 @@
+"""The single-filament model shared by the Bayesian and POMDP mappers.
+
+Seed reactive-planning §II-A/B (eq. 1-4) and seed pomdp-astar §II-C eq. 1. A filament released
+from a source at X_i at time t_l drifts with the flow record and random-walks with variance
+(t_k - t_l) sigma^2 per axis, so at t_k it is at X_i + V(t_l, t_k) + W with
+V(t_l, t_k) = sum_{i=l}^{k-1} U dt (reactive-planning eq. 4) and W ~ N(0, (t_k - t_l) sigma^2).
+The probability that it is in the vehicle's cell C_j now, p_ij(t_l, t_k), is separable:
+p_ij = p_y(row of C_i) p_x(column of C_i).
+
+Eq. 1 of pomdp-astar evaluates the Gaussian density at the cell centres and multiplies by the
+cell area L_x L_y (the midpoint rule); that exceeds 1 for short lags when a cell is large compared
+with sigma sqrt(t_k - t_l). We use the exact Gaussian mass over the cell instead, a difference of
+normal CDFs across the cell's extent: it is equally separable, always in [0, 1], and equals eq. 1
+to first order when the cell is small compared with the spread.
+
+Release times are one per flow-history entry: the filament released at the start of the newest
+entry has lag dt_newest and drift (dx, dy)_newest, the one before it the cumulative sums of the
+two newest entries, and so on back through the window. Rows of every stacked array below are
+ordered newest release first (shortest lag first).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.special import ndtr
+
+from service.mapping.belief import FloatArray
+
+if TYPE_CHECKING:
+    from service.grid import Grid
+    from service.mapping.mapper import FlowStep
+
+
+def release_offsets(history: Iterable[FlowStep]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Lag t_k - t_l (s) and drift V(t_l, t_k) (m, x and y) of each release time, newest first."""
+    steps = list(history)[::-1]
+    dt = np.fromiter((s.dt_s for s in steps), dtype=float, count=len(steps))
+    dx = np.fromiter((s.dx_m for s in steps), dtype=float, count=len(steps))
+    dy = np.fromiter((s.dy_m for s in steps), dtype=float, count=len(steps))
+    return np.cumsum(dt), np.cumsum(dx), np.cumsum(dy)
+
+
+def axis_cell_mass(edges: FloatArray, centre: FloatArray, spread: FloatArray) -> FloatArray:
+    """Mass of N(centre_l, spread_l^2) between consecutive ``edges``, shape (W, len(edges) - 1).
+
+    Each CDF value is taken from the nearer tail (F = Phi(z) - [z > 0]) so that the difference
+    keeps full relative precision far out in either tail; the cell that straddles the centre
+    gets the 1 back. A zero spread is a point mass (half to each side of an edge it sits on).
+    """
+    offset = edges[None, :] - centre[:, None]
+    z = np.copysign(np.inf, offset)
+    z[offset == 0.0] = 0.0
+    np.divide(offset, spread[:, None], out=z, where=spread[:, None] > 0.0)
+    tail = ndtr(-np.abs(z))
+    upper = z > 0.0
+    below = np.where(upper, -tail, tail)
+    mass: FloatArray = np.diff(below, axis=1) + np.diff(upper.astype(float), axis=1)
+    return np.clip(mass, 0.0, 1.0)
+
+
+def filament_factors(
+    grid: Grid,
+    x_m: float,
+    y_m: float,
+    lag_s: FloatArray,
+    drift_x_m: FloatArray,
+    drift_y_m: FloatArray,
+    sigma_x: float,
+    sigma_y: float,
+) -> tuple[FloatArray, FloatArray]:
+    """Per-axis factors Px (W, m), Py (W, n) of p_ij(t_l, t_k) for a vehicle cell centred at (x, y).
+
+    ``Py[l, row] * Px[l, col]`` is the probability that a filament released at release time l
+    from a source in cell (row, col) is in the vehicle's cell now: the mass over cell C_i of the
+    source position of eq. 4, X_s ~ N(X_j - V(t_l, t_k), (t_k - t_l) sigma^2), which is the same
+    as the mass of the filament over C_j (pomdp-astar eq. 1, exact per cell rather than midpoint).
+    """
+    x_edges: FloatArray = grid.x_min + np.arange(grid.columns + 1, dtype=np.float64) * grid.cell_width_m
+    y_edges: FloatArray = grid.y_min + np.arange(grid.rows + 1, dtype=np.float64) * grid.cell_height_m
+    root_lag = np.sqrt(lag_s)
+    # reactive-planning eq. 4: X_s = X_j - V(t_l, t_k) - W(t_l, t_k)
+    px = axis_cell_mass(x_edges, x_m - drift_x_m, sigma_x * root_lag)
+    py = axis_cell_mass(y_edges, y_m - drift_y_m, sigma_y * root_lag)
+    return px, py
+
+
+def history_factors(
+    grid: Grid, cell: int, history: Iterable[FlowStep], sigma_x: float, sigma_y: float
+) -> tuple[FloatArray, FloatArray]:
+    """``filament_factors`` for flat cell ``cell`` over every release time in ``history``."""
+    lag, drift_x, drift_y = release_offsets(history)
+    x, y = grid.centre(cell)
+    return filament_factors(grid, x, y, lag, drift_x, drift_y, sigma_x, sigma_y)
