@@ -8,6 +8,7 @@ is its own. The history window is filled before timing starts; the vehicle sweep
 from __future__ import annotations
 
 import math
+import multiprocessing
 import resource
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -99,7 +100,9 @@ def run(
     for c in cells:
         n_ticks = ticks if ticks is not None else (60 if c >= 100_000 else 200)
         for method in methods:
-            with ProcessPoolExecutor(max_workers=1, max_tasks_per_child=1) as pool:
+            # a fresh interpreter each time (spawn, not fork) so ru_maxrss is this configuration's own
+            spawn = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(max_workers=1, mp_context=spawn, max_tasks_per_child=1) as pool:
                 results.append(pool.submit(measure, method, c, window, n_ticks).result())
     return results
 
