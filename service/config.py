@@ -10,9 +10,9 @@ import tomllib
 from collections.abc import Sequence
 from enum import StrEnum
 from pathlib import Path
-from typing import Any, Self
+from typing import Annotated, Any, Self
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
 from service.errors import ConfigError
 
@@ -32,7 +32,17 @@ class MavlinkConfig(_Section):
     guided_mode: int = Field(default=15, ge=0)
     link_timeout_s: float = Field(default=3.0, gt=0)
     setpoint_rate_hz: float = Field(default=2.0, ge=2.0, le=50.0)
+    setpoint_type_mask: int = Field(default=3576, strict=False)
     altitude_m: float = 0.0
+    stream_hz: float = Field(default=5.0, gt=0, le=50.0)
+    queue_size: int = Field(default=1000, ge=10)
+
+    @field_validator("setpoint_type_mask")
+    @classmethod
+    def _position_only(cls, value: int) -> int:
+        if value not in (3576, 3580):
+            raise ValueError("must be 3576 (x, y, z) or 3580 (x, y) position-only")
+        return value
 
 
 class AreaConfig(_Section):
@@ -68,6 +78,8 @@ class SensorConfig(_Section):
     threshold: float = Field(default=1.0, ge=0)
     detection_probability: float = Field(default=0.9, gt=0, le=1)
     false_alarm_probability: float = Field(default=0.001, ge=0, lt=1)
+    detection_name: str = Field(default="CHEM_DET", min_length=1, max_length=10)
+    max_flow_mps: float = Field(default=20.0, gt=0)
 
 
 class MappingMethod(StrEnum):
@@ -86,8 +98,45 @@ class MappingConfig(_Section):
     tick_s: float = Field(default=1.0, gt=0, le=60)
 
 
+class PlanningMethod(StrEnum):
+    """Planner names of ``planning.method`` (the registry in ``service.planning`` uses the same)."""
+
+    ASTAR = "astar"
+    ASTAR_PAPER = "astar-paper"
+    MLDP = "mldp"
+    MLDP_PATH = "mldp-path"
+    APF = "apf"
+    INFOTAXIS = "infotaxis"
+
+
 class PlanningConfig(_Section):
-    method: str = Field(default="astar", min_length=1)
+    method: PlanningMethod = Field(default=PlanningMethod.ASTAR, strict=False)
+    mldp_steps: int = Field(default=25, gt=0, le=10_000)
+    apf_window: int = Field(default=10, ge=2, le=1_000)
+    apf_step_m: float = Field(default=2.0, gt=0)
+    apf_obstacle_gain: float = Field(default=1.0, ge=0)
+    apf_obstacle_range_m: float = Field(default=5.0, gt=0)
+    zigzag_spacing_m: float = Field(default=10.0, gt=0)
+    cast_width_m: float = Field(default=10.0, gt=0)
+    cast_legs: int = Field(default=4, ge=0, le=100)
+    lost_after_s: float = Field(default=20.0, gt=0)
+
+
+class DeclarationRule(StrEnum):
+    """How the source gets declared: the seed's stable estimate, or the mass near the estimate."""
+
+    STABLE = "stable"
+    MASS = "mass"
+
+
+class DeclarationConfig(_Section):
+    # TOML gives strings: the items (not only the list) must accept them
+    rules: list[Annotated[DeclarationRule, Strict(False)]] = Field(
+        default_factory=lambda: [DeclarationRule.STABLE, DeclarationRule.MASS], min_length=1
+    )
+    stable_s: float = Field(default=30.0, gt=0)
+    probability: float = Field(default=0.5, gt=0, le=1)
+    radius_m: float = Field(default=5.0, ge=0)
 
 
 class ZenohConfig(_Section):
@@ -108,6 +157,7 @@ class Config(_Section):
     sensor: SensorConfig = Field(default_factory=SensorConfig)
     mapping: MappingConfig = Field(default_factory=MappingConfig)
     planning: PlanningConfig = Field(default_factory=PlanningConfig)
+    declaration: DeclarationConfig = Field(default_factory=DeclarationConfig)
     zenoh: ZenohConfig = Field(default_factory=ZenohConfig)
     recorder: RecorderConfig = Field(default_factory=RecorderConfig)
 

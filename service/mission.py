@@ -1,0 +1,295 @@
+"""The mission state machine: find the plume, trace it, recover it, declare the source.
+
+Seed pomdp-astar §II-A: a search "can be divided into three phases, namely plume finding, plume
+tracing, and source declaration". The states:
+
+- ``FIND`` (published as ``search``): no detection yet; a zigzag sweep across the flow
+  (``planning.zigzag``), sweeping back the other way when it reaches the edge of the area, laid
+  out anew when the mean flow over the mapper's history turns by more than 45 degrees.
+- ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate.
+- ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
+  last detection (``planning.cast``), then the planner again. A detection returns to ``TRACE``.
+- ``DECLARED``: a declaration rule fired (``planning.declaration``); the vehicle holds. Rules are
+  only judged after the first detection: before it a flat map's argmax never moves.
+
+``Mission.step`` is pure: its inputs are this tick's observation (whose ``time_s`` is the only
+clock) and the vehicle state; it updates the mapper it was given and returns the waypoints to fly
+(``None``: keep flying the last ones) and the events of the tick. Every waypoint it returns comes
+out of ``_emit``, which passes it through ``planning.safety.safe_plan``: inside the search area,
+outside every obstacle, no leg across an obstacle. When the estimate cannot be reached, the
+planner aims at the nearest reachable cell instead; when a planner still finds no path
+(``NoPathError``), the obstacle-free A* takes over; when nothing can be planned, the vehicle holds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from enum import StrEnum
+from typing import TYPE_CHECKING, ClassVar
+
+from service.config import DeclarationConfig, DeclarationRule, PlanningConfig
+from service.errors import NoPathError
+from service.planning import make_planner
+from service.planning.astar import AStarPlanner
+from service.planning.base import PlanContext, Waypoint
+from service.planning.cast import cast_vertices
+from service.planning.crossflow import FlowFrame
+from service.planning.declaration import Declarer
+from service.planning.reach import Reachability
+from service.planning.safety import clamped_cell, safe_plan
+from service.planning.zigzag import zigzag_vertices
+
+if TYPE_CHECKING:
+    from service.config import Config
+    from service.grid import Grid
+    from service.mapping.mapper import Estimate, SourceMapper
+    from service.observation import Observation
+    from service.planning.base import Planner, VehicleState
+
+SWEEP_REDRAW_RAD = math.pi / 4.0
+"""A zigzag is laid out anew when the flow has turned more than this since it was laid out."""
+
+
+class MissionState(StrEnum):
+    """Mission phases; the values are the Zenoh ``estimate.state`` strings of DESIGN.md."""
+
+    FIND = "search"
+    TRACE = "trace"
+    LOST = "lost"
+    DECLARED = "declared"
+
+
+@dataclass(frozen=True)
+class PlumeFound:
+    """A detection outside ``TRACE``: the first one (``first``) or one that ends ``LOST``."""
+
+    time_s: float
+    x: float
+    y: float
+    first: bool
+
+
+@dataclass(frozen=True)
+class PlumeLost:
+    """No detection for ``lost_after_s``: (x, y) and ``last_detection_s`` are the last detection's."""
+
+    time_s: float
+    x: float
+    y: float
+    last_detection_s: float
+
+
+@dataclass(frozen=True)
+class SourceDeclared:
+    """The source is declared in the papers' cell ``cell`` centred on (x, y); ``rules`` fired."""
+
+    time_s: float
+    x: float
+    y: float
+    cell: int
+    probability: float
+    mass: float
+    rules: tuple[DeclarationRule, ...]
+
+
+MissionEvent = PlumeFound | PlumeLost | SourceDeclared
+
+
+@dataclass(frozen=True)
+class MissionOutput:
+    """One tick's answer. ``waypoints``: the waypoints to fly from now on, the first being the
+    current target, or None when they have not changed since the last ones returned."""
+
+    time_s: float
+    state: MissionState
+    waypoints: tuple[Waypoint, ...] | None
+    events: tuple[MissionEvent, ...]
+    estimate: Estimate
+
+
+class Mission:
+    """One search mission over ``grid`` with ``mapper``; call ``step`` once per tick."""
+
+    def __init__(
+        self,
+        grid: Grid,
+        mapper: SourceMapper,
+        planning: PlanningConfig | None = None,
+        declaration: DeclarationConfig | None = None,
+        *,
+        planner: Planner | None = None,
+    ) -> None:
+        if mapper.grid != grid:
+            raise ValueError("the mapper works on a different grid")
+        self.grid = grid
+        self.mapper = mapper
+        self.planning = planning or PlanningConfig()
+        self.planner = planner if planner is not None else make_planner(grid, self.planning)
+        self._router = AStarPlanner(grid, self.planning)  # zigzag, cast and fallback legs
+        self._reach = Reachability(grid)
+        self._declarer = Declarer(grid, declaration or DeclarationConfig())
+        self._state = MissionState.FIND
+        self._last_time: float | None = None
+        self._last_detection: tuple[float, float, float] | None = None  # (t, x, y)
+        self._frame: FlowFrame | None = None
+        self._pattern: tuple[Waypoint, ...] = ()
+        self._pattern_index = 0
+        self._sweep_frame: FlowFrame | None = None
+        self._sweep_upflow = True
+        self._emitted: tuple[Waypoint, ...] | None = None
+        self._hold: Waypoint | None = None
+
+    @classmethod
+    def from_config(cls, config: Config, grid: Grid, mapper: SourceMapper) -> Mission:
+        return cls(grid, mapper, config.planning, config.declaration)
+
+    @property
+    def state(self) -> MissionState:
+        return self._state
+
+    def step(self, obs: Observation, vehicle: VehicleState) -> MissionOutput:
+        """Fuse this tick's observation, move the state machine on, and plan."""
+        if self._last_time is not None and obs.time_s <= self._last_time:
+            # a repeated or out-of-order tick changes nothing (the mapper would ignore it too)
+            return MissionOutput(obs.time_s, self._state, None, (), self.mapper.estimate())
+        self._last_time = obs.time_s
+        self.mapper.update(obs)
+        self._frame = self._mean_flow_frame(obs)
+        estimate = self.mapper.estimate()
+        events = self._advance(obs)
+        if self._state is MissionState.DECLARED:
+            declared_now = any(isinstance(e, SourceDeclared) for e in events)
+            waypoints = self._emit(vehicle, ()) if declared_now else None
+        else:
+            ctx = PlanContext(
+                vehicle=vehicle,
+                cell=clamped_cell(self.grid, vehicle.x, vehicle.y),
+                goal=self.grid.flat_index(estimate.cell),
+                mapper=self.mapper,
+            )
+            waypoints = self._emit(vehicle, self._BEHAVIOUR[self._state](self, ctx))
+        return MissionOutput(obs.time_s, self._state, waypoints, tuple(events), estimate)
+
+    def _mean_flow_frame(self, obs: Observation) -> FlowFrame:
+        """The direction of the mean flow over the mapper's flow history (this tick's flow before
+        there is any): turbulent noise on single ticks must not turn the sweep around."""
+        history = self.mapper.history
+        dx = sum(step.dx_m for step in history) if history else obs.flow_x
+        dy = sum(step.dy_m for step in history) if history else obs.flow_y
+        return FlowFrame.from_flow(dx, dy, self._frame)
+
+    # -- state machine -------------------------------------------------------------------------
+
+    def _advance(self, obs: Observation) -> list[MissionEvent]:
+        events: list[MissionEvent] = []
+        if self._state is MissionState.DECLARED:
+            return events
+        t = obs.time_s
+        if obs.detected:
+            if self._state is not MissionState.TRACE:
+                events.append(PlumeFound(t, obs.x, obs.y, first=self._state is MissionState.FIND))
+                if self._state is MissionState.FIND:
+                    self._declarer.arm(t, self.mapper.likelihood)
+                self._enter(MissionState.TRACE)
+            self._last_detection = (t, obs.x, obs.y)
+        elif self._state is MissionState.TRACE and self._last_detection is not None:
+            t_last, x_last, y_last = self._last_detection
+            if t - t_last >= self.planning.lost_after_s:
+                events.append(PlumeLost(t, x_last, y_last, t_last))
+                self._enter(MissionState.LOST)
+        if self._declarer.armed:
+            found = self._declarer.update(t, self.mapper.likelihood)
+            if found is not None:
+                events.append(
+                    SourceDeclared(
+                        time_s=t,
+                        x=found.x,
+                        y=found.y,
+                        cell=found.paper_cell,
+                        probability=found.probability,
+                        mass=found.mass,
+                        rules=found.rules,
+                    )
+                )
+                self._enter(MissionState.DECLARED)
+        return events
+
+    def _enter(self, state: MissionState) -> None:
+        self._state = state
+        self._pattern, self._pattern_index = (), 0
+        if state is MissionState.LOST and self._last_detection is not None and self._frame is not None:
+            _, x, y = self._last_detection
+            p = self.planning
+            self._pattern = cast_vertices(self.grid, x, y, self._frame, p.cast_width_m, p.cast_legs)
+
+    # -- behaviours: the waypoints each state wants, before the safety rule -------------------
+
+    def _find(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
+        frame = self._frame or FlowFrame(1.0, 0.0)
+        if self._sweep_frame is None or frame.angle_to(self._sweep_frame) > SWEEP_REDRAW_RAD:
+            self._lay_sweep(ctx, frame)
+        wanted = self._follow_pattern(ctx)
+        if wanted is None:  # reached the edge of the area: sweep back the other way
+            self._sweep_upflow = not self._sweep_upflow
+            self._lay_sweep(ctx, frame)
+            wanted = self._follow_pattern(ctx)
+        return wanted or ()
+
+    def _lay_sweep(self, ctx: PlanContext, frame: FlowFrame) -> None:
+        v = ctx.vehicle
+        self._sweep_frame = frame
+        self._pattern = zigzag_vertices(
+            self.grid, v.x, v.y, frame, self.planning.zigzag_spacing_m, upflow=self._sweep_upflow
+        )
+        self._pattern_index = 0
+
+    def _trace(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
+        return self._route(self.planner, ctx)
+
+    def _lost(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
+        wanted = self._follow_pattern(ctx)
+        return wanted if wanted is not None else self._trace(ctx)
+
+    _BEHAVIOUR: ClassVar[dict[MissionState, Callable[[Mission, PlanContext], tuple[Waypoint, ...]]]] = {
+        MissionState.FIND: _find,
+        MissionState.TRACE: _trace,
+        MissionState.LOST: _lost,
+    }
+
+    def _follow_pattern(self, ctx: PlanContext) -> tuple[Waypoint, ...] | None:
+        """Waypoints to the next turning point not yet reached; None once all are reached. A
+        turning point that cannot be reached counts as reached at the nearest reachable cell."""
+        while self._pattern_index < len(self._pattern):
+            vertex = self._pattern[self._pattern_index]
+            target = self._reach.goal_for(ctx.cell, self.grid.cell_of(vertex.x, vertex.y))
+            if target != ctx.cell:
+                return self._route(self._router, replace(ctx, goal=target))
+            self._pattern_index += 1
+        return None
+
+    def _route(self, planner: Planner, ctx: PlanContext) -> tuple[Waypoint, ...]:
+        """The planner's waypoints to ``ctx.goal``, or to the nearest reachable cell if the goal
+        cannot be reached; the obstacle-free A* if the planner raises NoPathError; () if that
+        fails too (the vehicle then holds)."""
+        ctx = replace(ctx, goal=self._reach.goal_for(ctx.cell, ctx.goal))
+        for candidate in (planner, self._router):
+            try:
+                return candidate.plan(ctx).waypoints
+            except NoPathError:
+                continue
+        return ()
+
+    # -- the one place waypoints leave the mission ---------------------------------------------
+
+    def _emit(self, vehicle: VehicleState, wanted: tuple[Waypoint, ...]) -> tuple[Waypoint, ...] | None:
+        """Apply the safety rule; hold on a fixed point while nothing safe is planned; None when the
+        result equals the waypoints returned last."""
+        safe = safe_plan(self.grid, vehicle, wanted, hold_at=self._hold)
+        holding = bool(safe) and safe != wanted[: len(safe)]
+        self._hold = safe[0] if holding else None
+        if not safe or safe == self._emitted:
+            return None
+        self._emitted = safe
+        return safe

@@ -1,0 +1,105 @@
+"""Source declaration: when the mission stops and names the source cell.
+
+Two rules, each enabled by ``declaration.rules``:
+
+``stable`` (seed pomdp-astar §II-D): "The chemical source is declared to be found if the source
+likelihood map converges, i.e., the estimated source location produced from the source
+likelihood map does not change over 30 seconds" (``stable_s``).
+
+``mass``: at least ``probability`` of the map's mass lies in cells whose centres are within
+``radius_m`` of the estimated cell's centre. Unlike the stable rule it looks at how peaked the
+map is, so it neither waits out a map that is already sure nor declares a flat map whose argmax
+happens not to move.
+
+The estimate is the cell of greatest likelihood (the mapper's ``estimate``); ties go to the
+lowest flat index, as ``numpy.argmax`` does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from service.config import DeclarationRule
+
+if TYPE_CHECKING:
+    from service.config import DeclarationConfig
+    from service.grid import Grid
+    from service.mapping.belief import FloatArray
+
+
+@dataclass(frozen=True)
+class Declaration:
+    """A declared source: the flat cell, the papers' cell number, its centre, its likelihood, the
+    mass within the radius, and every rule that fired (in configuration order)."""
+
+    time_s: float
+    cell: int
+    paper_cell: int
+    x: float
+    y: float
+    probability: float
+    mass: float
+    rules: tuple[DeclarationRule, ...]
+
+    def __post_init__(self) -> None:
+        if not self.rules:
+            raise ValueError("a declaration names at least one rule")
+
+
+def mass_within(grid: Grid, likelihood: FloatArray, cell: int, radius_m: float) -> float:
+    """Sum of the likelihood over cells whose centre lies within ``radius_m`` of ``cell``'s centre."""
+    cx, cy = grid.centre(cell)
+    dx2 = (grid.x_centres - cx) ** 2
+    dy2 = (grid.y_centres - cy) ** 2
+    inside = dy2[:, None] + dx2[None, :] <= radius_m**2 * (1.0 + 1e-12)
+    return float(likelihood[inside].sum())
+
+
+class Declarer:
+    """Keeps the stable rule's clock and checks both rules once per tick after ``arm``."""
+
+    def __init__(self, grid: Grid, config: DeclarationConfig) -> None:
+        self.grid = grid
+        self.config = config
+        self._cell: int | None = None
+        self._since_s = 0.0
+
+    @property
+    def armed(self) -> bool:
+        return self._cell is not None
+
+    def arm(self, time_s: float, likelihood: FloatArray) -> None:
+        """Start judging at ``time_s`` (the first detection): the stable clock starts now."""
+        self._cell = int(np.argmax(likelihood))
+        self._since_s = time_s
+
+    def update(self, time_s: float, likelihood: FloatArray) -> Declaration | None:
+        """The declaration if an enabled rule fires at this tick, else None (always None unarmed)."""
+        if self._cell is None:
+            return None
+        cell = int(np.argmax(likelihood))
+        if cell != self._cell:
+            self._cell, self._since_s = cell, time_s
+        mass = mass_within(self.grid, likelihood, cell, self.config.radius_m)
+        fired = {
+            # the tolerance keeps ticks like 0.1 s summed in floating point from missing the mark
+            DeclarationRule.STABLE: time_s - self._since_s >= self.config.stable_s - 1e-9,
+            DeclarationRule.MASS: mass >= self.config.probability,
+        }
+        rules = tuple(dict.fromkeys(r for r in self.config.rules if fired[r]))
+        if not rules:
+            return None
+        x, y = self.grid.centre(cell)
+        return Declaration(
+            time_s=time_s,
+            cell=cell,
+            paper_cell=self.grid.paper_number(cell),
+            x=x,
+            y=y,
+            probability=float(likelihood.flat[cell]),
+            mass=mass,
+            rules=rules,
+        )

@@ -1,0 +1,94 @@
+import numpy as np
+import pytest
+
+from service.config import DeclarationConfig, DeclarationRule
+from service.grid import Grid
+from service.planning.declaration import Declarer, mass_within
+
+G = Grid(0.0, 5.0, 0.0, 5.0, columns=5, rows=5)  # 1 m cells
+
+
+def peaked(cell: int, peak: float = 0.3) -> np.ndarray:
+    rest = (1.0 - peak) / (G.size - 1)
+    pi = np.full(G.shape, rest)
+    pi.flat[cell] = peak
+    return pi
+
+
+def test_mass_within_radius_by_hand() -> None:
+    pi = np.arange(25, dtype=float).reshape(5, 5)
+    pi /= pi.sum()  # total 300
+    centre = G.cell_of(2.5, 2.5)  # flat 12
+    # radius 1: the cell and its four side neighbours (7, 11, 13, 17); diagonals are sqrt(2) away
+    assert mass_within(G, pi, centre, 1.0) == pytest.approx((12 + 7 + 11 + 13 + 17) / 300)
+    assert mass_within(G, pi, centre, 1.5) == pytest.approx((6 + 7 + 8 + 11 + 12 + 13 + 16 + 17 + 18) / 300)
+    assert mass_within(G, pi, centre, 0.0) == pytest.approx(12 / 300)
+    corner = G.cell_of(0.5, 0.5)  # flat 0: only 1 and 5 are within 1 m, inside the area
+    assert mass_within(G, pi, corner, 1.0) == pytest.approx((0 + 1 + 5) / 300)
+
+
+def test_stable_rule_fires_after_30_s_unchanged() -> None:
+    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.STABLE]))
+    assert d.update(0.0, peaked(3)) is None  # not armed yet
+    d.arm(100.0, peaked(3))
+    for t in range(101, 130):
+        assert d.update(float(t), peaked(3)) is None
+    found = d.update(130.0, peaked(3))
+    assert found is not None
+    assert found.rules == (DeclarationRule.STABLE,)
+    assert found.cell == 3
+    assert found.paper_cell == G.paper_number(3)
+    assert (found.x, found.y) == G.centre(3)
+    assert found.probability == pytest.approx(0.3)
+
+
+def test_a_new_estimate_restarts_the_clock() -> None:
+    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.STABLE], stable_s=30.0))
+    d.arm(0.0, peaked(3))
+    assert d.update(10.0, peaked(7)) is None  # changed at t = 10
+    assert d.update(39.0, peaked(7)) is None
+    found = d.update(40.0, peaked(7))
+    assert found is not None
+    assert found.cell == 7
+
+
+def test_fractional_ticks_reach_the_mark() -> None:
+    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.STABLE], stable_s=3.0))
+    d.arm(0.0, peaked(3))
+    t, found = 0.0, None
+    for _ in range(30):  # 0.1 s ticks summed in floating point: 2.9999999999999996
+        t += 0.1
+        found = d.update(t, peaked(3))
+    assert found is not None
+
+
+def test_mass_rule_and_which_fired() -> None:
+    config = DeclarationConfig(
+        rules=[DeclarationRule.MASS, DeclarationRule.STABLE], probability=0.6, radius_m=1.0
+    )
+    d = Declarer(G, config)
+    centre = G.cell_of(2.5, 2.5)
+    d.arm(0.0, peaked(centre, 0.2))
+    # 0.5 at the centre, 0.04 on each side neighbour: 0.66 within 1 m
+    pi = np.full(G.shape, (1.0 - 0.5 - 4 * 0.04) / 20)
+    pi.flat[centre] = 0.5
+    for side in (7, 11, 13, 17):
+        pi.flat[side] = 0.04
+    found = d.update(1.0, pi)
+    assert found is not None
+    assert found.rules == (DeclarationRule.MASS,)
+    assert found.mass == pytest.approx(0.66)
+    # the estimate has been the centre since arming at t = 0: at t = 30 both fire, in the
+    # configured order
+    only_mass = d.update(29.0, pi)
+    assert only_mass is not None
+    assert only_mass.rules == (DeclarationRule.MASS,)
+    both = d.update(30.0, pi)
+    assert both is not None
+    assert both.rules == (DeclarationRule.MASS, DeclarationRule.STABLE)
+
+
+def test_mass_rule_alone_ignores_a_stable_but_flat_map() -> None:
+    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=1.0))
+    d.arm(0.0, peaked(12, 0.1))
+    assert all(d.update(float(t), peaked(12, 0.1)) is None for t in range(1, 100))

@@ -1,0 +1,395 @@
+import itertools
+import math
+from collections import deque
+
+import numpy as np
+import pytest
+
+from service.config import DeclarationConfig, DeclarationRule, PlanningConfig, PlanningMethod, build_config
+from service.grid import Grid
+from service.mapping.belief import FloatArray
+from service.mapping.hmm import HmmMapper
+from service.mapping.mapper import SourceMapper
+from service.mission import Mission, MissionState, PlumeFound, PlumeLost, SourceDeclared
+from service.observation import Observation
+from service.planning import PLANNERS
+from service.planning.base import VehicleState, Waypoint
+
+
+class ScriptedMapper(SourceMapper):
+    """A mapper whose source map the test sets; its detection model is a fixed random table."""
+
+    name = "scripted"
+
+    def __init__(self, grid: Grid, seed: int = 0) -> None:
+        super().__init__(grid)
+        self._table = np.random.default_rng(seed).uniform(0.0, 0.5, size=(grid.size, *grid.shape))
+
+    def set(self, pi: FloatArray) -> None:
+        self._pi = pi / pi.sum()
+
+    def peak_at(self, cell: int, peak: float = 0.5) -> None:
+        pi = np.full(self.grid.shape, (1.0 - peak) / max(self.grid.size - 1, 1))
+        pi.flat[cell] = peak
+        self.set(pi)
+
+    def _assimilate(self, cell: int, detected: bool) -> None:
+        pass
+
+    def detection_likelihood(self, cell: int) -> FloatArray:
+        out: FloatArray = self._table[cell]
+        return out
+
+
+NEVER = DeclarationConfig(rules=[DeclarationRule.STABLE], stable_s=1e9)
+"""Declaration off, for tests of the other states."""
+
+# -- independent references ---------------------------------------------------------------------
+
+
+def overlaps(grid: Grid, row: int, col: int) -> bool:
+    """Does cell (row, col) overlap an obstacle rectangle with positive area?"""
+    x0 = grid.x_min + col * grid.cell_width_m
+    y0 = grid.y_min + row * grid.cell_height_m
+    x1, y1 = x0 + grid.cell_width_m, y0 + grid.cell_height_m
+    return any(
+        min(x1, bx1) > max(x0, bx0) and min(y1, by1) > max(y0, by0) for bx0, by0, bx1, by1 in grid.obstacles
+    )
+
+
+def in_rectangle(grid: Grid, x: float, y: float) -> bool:
+    return any(bx0 <= x <= bx1 and by0 <= y <= by1 for bx0, by0, bx1, by1 in grid.obstacles)
+
+
+def assert_safe_waypoint(grid: Grid, w: Waypoint) -> None:
+    assert grid.x_min <= w.x <= grid.x_max, w
+    assert grid.y_min <= w.y <= grid.y_max, w
+    assert not in_rectangle(grid, w.x, w.y), w
+    col = min(int((w.x - grid.x_min) / grid.cell_width_m), grid.columns - 1)
+    row = min(int((w.y - grid.y_min) / grid.cell_height_m), grid.rows - 1)
+    # a point on a cell boundary belongs to both cells: neither may be an obstacle cell
+    cols = {col, max(col - 1, 0)} if math.isclose((w.x - grid.x_min) / grid.cell_width_m % 1, 0) else {col}
+    rows = {row, max(row - 1, 0)} if math.isclose((w.y - grid.y_min) / grid.cell_height_m % 1, 0) else {row}
+    assert not any(overlaps(grid, r, c) for r in rows for c in cols), w
+
+
+def assert_clear_leg(grid: Grid, a: tuple[float, float], b: tuple[float, float]) -> None:
+    for t in np.linspace(0.0, 1.0, 101):
+        x, y = a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])
+        assert not in_rectangle(grid, x, y), (a, b)
+
+
+def free_mask(grid: Grid) -> np.ndarray:
+    return np.array([[not overlaps(grid, r, c) for c in range(grid.columns)] for r in range(grid.rows)])
+
+
+def bfs(free: np.ndarray, start: tuple[int, int]) -> np.ndarray:
+    n, m = free.shape
+    seen = np.zeros_like(free)
+    seen[start] = True
+    queue = deque([start])
+    while queue:
+        r, c = queue.popleft()
+        for dr, dc in itertools.product((-1, 0, 1), repeat=2):
+            rr, cc = r + dr, c + dc
+            if not (0 <= rr < n and 0 <= cc < m) or not free[rr, cc] or seen[rr, cc]:
+                continue
+            if dr and dc and not (free[r + dr, c] and free[r, c + dc]):
+                continue
+            seen[rr, cc] = True
+            queue.append((rr, cc))
+    out: np.ndarray = seen & free
+    return out
+
+
+def random_area(rng: np.random.Generator) -> Grid:
+    m, n = int(rng.integers(3, 11)), int(rng.integers(3, 11))
+    lx, ly = float(rng.uniform(1.0, 5.0)), float(rng.uniform(1.0, 5.0))
+    x0, y0 = float(rng.uniform(-50, 50)), float(rng.uniform(-50, 50))
+    boxes = []
+    for _ in range(int(rng.integers(0, 6))):
+        bx, by = x0 + rng.uniform(0, m * lx), y0 + rng.uniform(0, n * ly)
+        boxes.append((bx, by, bx + rng.uniform(0.2, 3) * lx, by + rng.uniform(0.2, 3) * ly))
+    return Grid(x0, x0 + m * lx, y0, y0 + n * ly, columns=m, rows=n, obstacles=tuple(boxes))
+
+
+class Vehicle:
+    """A vehicle that reaches its current target in one tick and then takes the next one."""
+
+    def __init__(self, x: float, y: float) -> None:
+        self.x, self.y = x, y
+        self.queue: list[Waypoint] = []
+
+    def follow(self, waypoints: tuple[Waypoint, ...] | None) -> None:
+        if waypoints is not None:
+            self.queue = list(waypoints)
+
+    def move(self) -> None:
+        if self.queue:
+            w = self.queue.pop(0)
+            self.x, self.y = w.x, w.y
+
+    @property
+    def state(self) -> VehicleState:
+        return VehicleState(self.x, self.y, 0.0)
+
+
+# -- safety invariants over many random maps ----------------------------------------------------
+
+
+@pytest.mark.parametrize("method", sorted(PLANNERS))
+def test_no_unsafe_waypoint_on_random_maps(method: str) -> None:
+    rng = np.random.default_rng(sum(map(ord, method)))
+    planning = PlanningConfig(method=PlanningMethod(method), mldp_steps=4, lost_after_s=3.0, cast_legs=2)
+    emitted = started_inside = 0
+    states: set[MissionState] = set()
+    for trial in range(80):
+        grid = random_area(rng)
+        mapper = ScriptedMapper(grid, seed=trial)
+        mission = Mission(grid, mapper, planning, NEVER)
+        # anywhere, including inside obstacles and a little outside the area
+        vx = float(rng.uniform(grid.x_min - 3, grid.x_max + 3))
+        vy = float(rng.uniform(grid.y_min - 3, grid.y_max + 3))
+        vehicle = Vehicle(vx, vy)
+        started_inside += in_rectangle(grid, vx, vy)
+        for t in range(15):
+            mapper.set(rng.random(grid.shape) ** 4)
+            flow = rng.normal(0.0, 1.0, size=2)
+            obs = Observation(
+                float(t), vehicle.x, vehicle.y, float(flow[0]), float(flow[1]), bool(rng.random() < 0.3)
+            )
+            before = (vehicle.x, vehicle.y)
+            out = mission.step(obs, vehicle.state)
+            states.add(out.state)
+            if out.waypoints is not None:
+                emitted += 1
+                assert out.waypoints, "an emitted plan is never empty"
+                for w in out.waypoints:
+                    assert_safe_waypoint(grid, w)
+                legs = [(w.x, w.y) for w in out.waypoints]
+                # the leg from the vehicle too, unless it is inside an obstacle (no leg can be clear)
+                if not in_rectangle(grid, *before):
+                    legs = [before, *legs]
+                for a, b in itertools.pairwise(legs):
+                    assert_clear_leg(grid, a, b)
+            vehicle.follow(out.waypoints)
+            vehicle.move()
+    # the cases that matter were met: every state, and vehicles starting inside an obstacle
+    assert emitted > 400
+    assert states == {MissionState.FIND, MissionState.TRACE, MissionState.LOST}
+    assert started_inside > 3
+
+
+def test_reaches_the_estimate_whenever_a_path_exists() -> None:
+    rng = np.random.default_rng(2024)
+    reached = fell_back = 0
+    for trial in range(60):
+        grid = random_area(rng)
+        free = free_mask(grid)
+        if not free.any():
+            continue
+        row, col = (int(v) for v in rng.choice(np.argwhere(free)))
+        start = (row, col)
+        goal = int(rng.integers(0, grid.size))
+        mapper = ScriptedMapper(grid, seed=trial)
+        mapper.peak_at(goal)
+        mission = Mission(grid, mapper, PlanningConfig(), NEVER)
+        x, y = grid.centre(start[0] * grid.columns + start[1])
+        vehicle = Vehicle(x, y)
+        for t in range(2 * grid.size + 2):
+            obs = Observation(float(t), vehicle.x, vehicle.y, 0.3, 0.1, True)
+            out = mission.step(obs, vehicle.state)
+            assert mission.state is MissionState.TRACE
+            vehicle.follow(out.waypoints)
+            vehicle.move()
+        reach = bfs(free, start)
+        here = grid.cell_of(vehicle.x, vehicle.y)
+        if reach.flat[goal]:
+            assert here == goal, f"trial {trial}: stopped in {here}, goal {goal} was reachable"
+            reached += 1
+        else:
+            # no path: the mission went to the reachable cell nearest the estimate, without error
+            gx, gy = grid.centre(goal)
+            dist = [math.dist(grid.centre(int(c)), (gx, gy)) for c in np.flatnonzero(reach)]
+            assert reach.flat[here]
+            assert math.dist(grid.centre(here), (gx, gy)) == pytest.approx(min(dist))
+            fell_back += 1
+    assert reached > 20
+    assert fell_back > 5
+
+
+# -- the state machine --------------------------------------------------------------------------
+
+AREA = Grid(0.0, 100.0, -50.0, 50.0, columns=20, rows=20)  # 5 m cells
+SOURCE = AREA.cell_of(22.0, 3.0)
+
+
+def mission_with(mapper: SourceMapper, **declaration: object) -> Mission:
+    planning = PlanningConfig(lost_after_s=10.0, cast_width_m=10.0, cast_legs=2, zigzag_spacing_m=10.0)
+    decl = DeclarationConfig(**declaration)  # type: ignore[arg-type]
+    return Mission(AREA, mapper, planning, decl)
+
+
+def test_find_trace_lose_recover_declare() -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.05)
+    mission = mission_with(mapper, rules=[DeclarationRule.STABLE], stable_s=30.0)
+    v = VehicleState(90.0, -40.0)
+    flow = (1.0, 0.0)
+
+    def tick(t: float, detected: bool = False) -> tuple:  # type: ignore[type-arg]
+        out = mission.step(Observation(t, v.x, v.y, *flow, detected), v)
+        return out.state, out.events, out.waypoints
+
+    # FIND: a zigzag across the flow (flow East: the first leg runs North, across it)
+    state, events, wps = tick(0.0)
+    assert state is MissionState.FIND
+    assert events == ()
+    assert wps is not None
+    assert wps[-1].x == pytest.approx(AREA.centre(AREA.cell_of(90.0, 47.0))[0])
+    assert wps[-1].y == pytest.approx(AREA.y_centres[-1])
+    assert tick(1.0)[2] is None  # nothing changed: keep flying
+    # the first detection: TRACE toward the estimate
+    state, events, wps = tick(5.0, detected=True)
+    assert state is MissionState.TRACE
+    assert events == (PlumeFound(5.0, 90.0, -40.0, first=True),)
+    assert wps is not None
+    assert (wps[-1].x, wps[-1].y) == AREA.centre(SOURCE)
+    # no detection for lost_after_s: LOST, and a cast across the flow at the last detection
+    assert tick(14.0)[0] is MissionState.TRACE
+    state, events, wps = tick(15.0)
+    assert state is MissionState.LOST
+    assert events == (PlumeLost(15.0, 90.0, -40.0, last_detection_s=5.0),)
+    assert wps is not None
+    # the first cast leg: 10 m across the flow (North), to the centre of that cell
+    assert (wps[-1].x, wps[-1].y) == AREA.centre(AREA.cell_of(90.0, -30.0))
+    # a detection ends LOST
+    state, events, _ = tick(20.0, detected=True)
+    assert state is MissionState.TRACE
+    assert events == (PlumeFound(20.0, 90.0, -40.0, first=False),)
+    # the estimate has not moved since the first detection: declared at t = 5 + 30
+    for t in range(21, 35):
+        assert tick(float(t), detected=True)[0] is MissionState.TRACE
+    state, events, wps = tick(35.0, detected=True)
+    assert state is MissionState.DECLARED
+    x, y = AREA.centre(SOURCE)
+    (declared,) = events
+    assert isinstance(declared, SourceDeclared)
+    rule = (DeclarationRule.STABLE,)
+    assert declared == SourceDeclared(
+        35.0, x, y, AREA.paper_number(SOURCE), declared.probability, declared.mass, rule
+    )
+    assert declared.probability == pytest.approx(0.05)
+    # radius 5 m on 5 m cells: the cell and its four side neighbours, (1 - 0.05) / 399 each
+    assert declared.mass == pytest.approx(0.05 + 4 * 0.95 / 399)
+    assert wps == (Waypoint(v.x, v.y),)  # hold where it is
+    # declared is final: no more waypoints or events, the map keeps updating
+    state, events, wps = tick(36.0, detected=True)
+    assert (state, events, wps) == (MissionState.DECLARED, (), None)
+
+
+def test_mass_rule_declares_and_says_so() -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.9)
+    mission = mission_with(mapper, rules=[DeclarationRule.STABLE, DeclarationRule.MASS], probability=0.8)
+    v = VehicleState(50.0, 0.0)
+    out = mission.step(Observation(0.0, v.x, v.y, 1.0, 0.0, False), v)
+    assert out.state is MissionState.FIND  # no rule is judged before the first detection
+    out = mission.step(Observation(1.0, v.x, v.y, 1.0, 0.0, True), v)
+    assert out.state is MissionState.DECLARED
+    (found, declared) = out.events
+    assert isinstance(found, PlumeFound)
+    assert isinstance(declared, SourceDeclared)
+    assert declared.rules == (DeclarationRule.MASS,)
+
+
+def test_time_comes_only_from_the_observation() -> None:
+    mapper = ScriptedMapper(AREA)
+    mission = mission_with(mapper)
+    v = VehicleState(50.0, 0.0)
+    first = mission.step(Observation(10.0, v.x, v.y, 1.0, 0.0, False), v)
+    assert first.waypoints is not None
+    repeat = mission.step(Observation(10.0, v.x, v.y, 1.0, 0.0, True), v)
+    assert repeat.waypoints is None
+    assert repeat.events == ()
+    assert repeat.state is MissionState.FIND  # the repeated tick's detection was not taken
+    earlier = mission.step(Observation(9.0, v.x, v.y, 1.0, 0.0, True), v)
+    assert earlier.events == ()
+
+
+def test_unreachable_estimate_is_handled_without_error() -> None:
+    # the estimate sits inside a walled-off pocket: go to the nearest reachable cell and hold
+    walls = (
+        (40.0, 0.0, 60.0, 5.0),
+        (40.0, 15.0, 60.0, 20.0),
+        (40.0, 0.0, 45.0, 20.0),
+        (55.0, 0.0, 60.0, 20.0),
+    )
+    grid = Grid(0.0, 100.0, -50.0, 50.0, columns=20, rows=20, obstacles=walls)
+    pocket = grid.cell_of(50.0, 10.0)
+    assert not grid.obstacle_mask.flat[pocket]
+    mapper = ScriptedMapper(grid)
+    mapper.peak_at(pocket)
+    mission = Mission(grid, mapper, PlanningConfig(), NEVER)
+    vehicle = Vehicle(5.0, -45.0)
+    for t in range(60):
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 0.0, 1.0, t == 0), vehicle.state)
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+    here = grid.cell_of(vehicle.x, vehicle.y)
+    assert math.dist(grid.centre(here), grid.centre(pocket)) == pytest.approx(10.0)  # just outside a wall
+
+
+def test_with_the_hmm_mapper_end_to_end() -> None:
+    # a real mapper, every planner: the mission runs and stays safe on the paper's grid
+    grid = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25, obstacles=((60.0, 10.0, 80.0, 17.5),))
+    for method in sorted(PLANNERS):
+        mapper = HmmMapper(grid)
+        mission = Mission(grid, mapper, PlanningConfig(method=PlanningMethod(method)))
+        vehicle = Vehicle(70.0, -40.0)
+        for t in range(20):
+            detected = 8 <= t <= 12
+            out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, detected), vehicle.state)
+            if out.waypoints is not None:
+                for w in out.waypoints:
+                    assert_safe_waypoint(grid, w)
+            vehicle.follow(out.waypoints)
+            vehicle.move()
+        assert mission.state in (MissionState.TRACE, MissionState.LOST)
+
+
+def test_states_are_the_zenoh_estimate_states() -> None:
+    # DESIGN.md: estimate.state is one of search, trace, lost, declared
+    assert [s.value for s in MissionState] == ["search", "trace", "lost", "declared"]
+
+
+def test_from_config() -> None:
+    config = build_config({}, ["planning.method=apf", "declaration.stable_s=12.5"])
+    mission = Mission.from_config(config, AREA, ScriptedMapper(AREA))
+    assert mission.planner.name == "apf"
+    assert mission.state is MissionState.FIND
+    with pytest.raises(ValueError, match="different grid"):
+        Mission.from_config(config, AREA, ScriptedMapper(Grid(0.0, 1.0, 0.0, 1.0, columns=1, rows=1)))
+
+
+def test_the_sweep_turns_with_the_mean_flow() -> None:
+    mapper = ScriptedMapper(AREA)
+    mission = Mission(AREA, mapper, PlanningConfig(), NEVER)
+    v = VehicleState(50.0, 0.0)
+    x_edges = (AREA.x_centres[0], AREA.x_centres[-1])
+    y_edges = (AREA.y_centres[0], AREA.y_centres[-1])
+    out = mission.step(Observation(0.0, v.x, v.y, 1.0, 0.0, False), v)
+    assert out.waypoints is not None
+    assert min(abs(out.waypoints[-1].y - e) for e in y_edges) < 1e-9  # legs run North-South
+    for t in range(1, 6):
+        mission.step(Observation(float(t), v.x, v.y, 1.0, 0.0, False), v)
+    # single noisy ticks across do not turn it (the mean flow is still East) ...
+    out = mission.step(Observation(6.0, v.x, v.y, 0.0, 3.0, False), v)
+    assert out.waypoints is None
+    # ... a lasting turn to North does: the legs now run East-West
+    last = None
+    for t in range(7, 20):
+        got = mission.step(Observation(float(t), v.x, v.y, 0.0, 1.0, False), v).waypoints
+        last = got if got is not None else last
+    assert last is not None
+    assert min(abs(last[-1].x - e) for e in x_edges) < 1e-9  # legs run East-West
