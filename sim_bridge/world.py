@@ -1,0 +1,79 @@
+"""The simulated world: flow, plume, detector and vehicle stepped together in simulated time.
+
+One ``step`` is ``dt_s`` seconds (10 Hz by default, the plume's step). Within a step the plume
+and the vehicle move with the flow as it was at the start of the step (explicit Euler), then
+the flow and the detector advance. Nothing here knows about wall-clock time or sockets.
+"""
+
+from __future__ import annotations
+
+import math
+
+from service.grid import Rectangle
+from sim_bridge import vehicle as kinematics
+from sim_bridge.detector import BinaryDetector
+from sim_bridge.flow import FlowField, velocity_at
+from sim_bridge.plume import PuffPlume
+from sim_bridge.vehicle import VehicleParams, VehicleState
+
+
+class World:
+    """Flow + plume + detector + one vehicle, advanced by ``step()``."""
+
+    def __init__(
+        self,
+        *,
+        flow: FlowField,
+        plume: PuffPlume,
+        detector: BinaryDetector,
+        vehicle: VehicleState,
+        vehicle_params: VehicleParams,
+        obstacles: tuple[Rectangle, ...] = (),
+        dt_s: float = 0.1,
+    ) -> None:
+        if not (math.isfinite(dt_s) and dt_s > 0):
+            raise ValueError(f"dt_s must be positive and finite, got {dt_s}")
+        self.flow = flow
+        self.plume = plume
+        self.detector = detector
+        self.vehicle = vehicle
+        self.vehicle_params = vehicle_params
+        self.obstacles = obstacles
+        self.dt_s = dt_s
+        self.target_m: tuple[float, float] | None = None
+        """Where the vehicle is driving to; None: stay put."""
+        self.driving = False
+        """Whether the vehicle may move (the stub sets it: GUIDED and armed)."""
+        self._steps = 0
+
+    @property
+    def time_s(self) -> float:
+        """Simulated time since the world started."""
+        return self._steps * self.dt_s
+
+    def step(self) -> None:
+        """Advance the world by one ``dt_s``."""
+        dt = self.dt_s
+        self.plume.step(dt, self.flow)
+        target = self.target_m if self.driving else None
+        self.vehicle = kinematics.step(self.vehicle, target, self.vehicle_params, dt, self.obstacles)
+        self.flow.advance(dt)
+        self.detector.advance(dt)
+        self._steps += 1
+
+    def run(self, duration_s: float) -> None:
+        """Step until ``duration_s`` more seconds have passed (rounded to whole steps)."""
+        for _ in range(round(duration_s / self.dt_s)):
+            self.step()
+
+    def flow_at_vehicle(self) -> tuple[float, float]:
+        """Flow (u_x East, u_y North), m/s toward, at the vehicle."""
+        return velocity_at(self.flow, self.vehicle.x_m, self.vehicle.y_m)
+
+    def concentration_at_vehicle(self) -> float:
+        """True instantaneous concentration at the vehicle."""
+        return float(self.plume.concentration(self.vehicle.x_m, self.vehicle.y_m)[0])
+
+    def chem_reading(self) -> float:
+        """What the vehicle's chemical sensor reports now (detector misses and false alarms applied)."""
+        return self.detector.read(self.concentration_at_vehicle())
