@@ -13,6 +13,9 @@ from service.errors import OslimError
 # sub-command name -> module exposing add_parser(subparsers) and run(args) -> int
 COMMANDS: dict[str, str] = {
     "bench": "service.bench.command",
+    "serve": "service.app",
+    "stub": "sim_bridge.stub_command",
+    "replay": "service.replay",
 }
 
 
