@@ -23,6 +23,7 @@ import logging
 import math
 import signal
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -128,6 +129,8 @@ class Service:
         self.declared: SourceDeclared | None = None
         self.started = asyncio.Event()
         """Set once the MAVLink, Zenoh and MCAP edges are all open."""
+        self.tick_wall: deque[tuple[float, float]] = deque(maxlen=4096)
+        """(tick time_s rounded to ms, wall-clock time.time() when the tick started): for latency probes."""
         self._position: Position | None = None
         self._heading_rad = 0.0
         self._gate_state = GateState(False, "starting")
@@ -210,6 +213,7 @@ class Service:
         while True:
             await self.clock.sleep_until(deadline)
             started = time.perf_counter()
+            self.tick_wall.append((round(deadline, 3), time.time()))
             self.stats.jitter_ms.append(max(0.0, (self.clock.now() - deadline) / self.clock.speed * 1e3))
             self._tick(self.aggregator.close(deadline), started)
             self.stats.tick_ms.append((time.perf_counter() - started) * 1e3)

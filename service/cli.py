@@ -14,6 +14,7 @@ from service.errors import OslimError
 COMMANDS: dict[str, str] = {
     "bench": "service.bench.command",
     "serve": "service.app",
+    "sim": "service.sim",
     "stub": "sim_bridge.stub_command",
     "replay": "service.replay",
 }

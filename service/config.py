@@ -137,6 +137,7 @@ class DeclarationConfig(_Section):
     stable_s: float = Field(default=30.0, gt=0)
     probability: float = Field(default=0.5, gt=0, le=1)
     radius_m: float = Field(default=5.0, ge=0)
+    visit_radius_m: float = Field(default=5.0, gt=0)
 
 
 class ZenohConfig(_Section):
@@ -144,6 +145,9 @@ class ZenohConfig(_Section):
     connect: list[str] = Field(default_factory=list)
     listen: list[str] = Field(default_factory=list)
     key_prefix: str = Field(default="oslim", min_length=1)
+    multicast_scouting: bool = True
+    options: dict[str, Any] = Field(default_factory=dict)
+    """Further Zenoh settings by config path (TLS, access control...), passed through verbatim."""
 
 
 class RecorderConfig(_Section):

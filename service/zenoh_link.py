@@ -134,11 +134,12 @@ def session_config(config: ZenohConfig, extra: Mapping[str, Any] | None = None) 
     (``scouting/multicast/enabled``). Empty ``connect`` / ``listen`` keep Zenoh's defaults
     (a peer listens on an ephemeral TCP port), so peers still find each other.
     """
-    settings: dict[str, Any] = {"mode": config.mode}
+    settings: dict[str, Any] = {"mode": config.mode, "scouting/multicast/enabled": config.multicast_scouting}
     if config.connect:
         settings["connect/endpoints"] = list(config.connect)
     if config.listen:
         settings["listen/endpoints"] = list(config.listen)
+    settings.update(config.options)
     settings.update(extra or {})
     conf = zenoh.Config()
     for key, value in settings.items():

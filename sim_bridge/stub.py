@@ -450,6 +450,16 @@ class VehicleStub:
         self._texts.append(StatusText(self._sim_now_s, int(msg.severity), text.rstrip("\x00")))
         log.info("STATUSTEXT from %d/%d: %s", msg.get_srcSystem(), msg.get_srcComponent(), text)
 
+    def pilot_mode(self, custom_mode: int) -> bool:
+        """The pilot's mode switch (RC or ground station): False for a mode the vehicle lacks."""
+        return self._set_mode(custom_mode)
+
+    def pilot_arm(self, armed: bool) -> None:
+        """The pilot arms or disarms the vehicle."""
+        if armed != self._armed:
+            log.info("%s by the pilot", "armed" if armed else "disarmed")
+        self._armed = armed
+
     def _set_mode(self, custom_mode: int) -> bool:
         if custom_mode not in self._autopilot.modes:
             return False

@@ -44,6 +44,8 @@ class World:
         """Where the vehicle is driving to; None: stay put."""
         self.driving = False
         """Whether the vehicle may move (the stub sets it: GUIDED and armed)."""
+        self.distance_m = 0.0
+        """Odometer: the length of the vehicle's track so far."""
         self._steps = 0
 
     @property
@@ -56,7 +58,9 @@ class World:
         dt = self.dt_s
         self.plume.step(dt, self.flow)
         target = self.target_m if self.driving else None
-        self.vehicle = kinematics.step(self.vehicle, target, self.vehicle_params, dt, self.obstacles)
+        before = self.vehicle
+        self.vehicle = kinematics.step(before, target, self.vehicle_params, dt, self.obstacles)
+        self.distance_m += math.hypot(self.vehicle.x_m - before.x_m, self.vehicle.y_m - before.y_m)
         self.flow.advance(dt)
         self.detector.advance(dt)
         self._steps += 1
