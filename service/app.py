@@ -12,6 +12,11 @@ Tasks, all on one event loop:
   allows it (armed, GUIDED, link alive) and only if it is a safe point.
 
 The numerical work (mapper, mission) is the same pure code the benchmarks and replay run.
+
+Start-up order (so that a failure leaves nothing half-started): configuration, signing key and
+restart snapshot are read first, then the MAVLink link, then Zenoh, and the MCAP recorder last,
+so no run file is created for a service that did not start. Each edge is an (async) context
+manager and closes what it opened if a later one fails.
 """
 
 from __future__ import annotations
@@ -38,6 +43,8 @@ from service.mission import Mission, MissionOutput, PlumeFound, PlumeLost, Sourc
 from service.planning.base import VehicleState, Waypoint
 from service.planning.safety import is_safe_point
 from service.recorder import Recorder
+from service.signing import load_signing_key
+from service.snapshot import Snapshot, SnapshotWriter, fingerprint, map_digest, read_snapshot
 from service.telemetry import Heartbeat, Position, Rejected, TelemetrySettings, decode
 from service.tick import Tick, TickAggregator
 from service.zenoh_link import ZenohLink
@@ -56,9 +63,14 @@ class Clock:
             raise ValueError(f"speed must be a positive number, got {speed}")
         self.speed = speed
         self._origin = time.monotonic()
+        self._offset_s = 0.0
 
     def now(self) -> float:
-        return (time.monotonic() - self._origin) * self.speed
+        return (time.monotonic() - self._origin) * self.speed + self._offset_s
+
+    def resume_at(self, time_s: float) -> None:
+        """Make ``now()`` continue from ``time_s`` (a restored snapshot's time)."""
+        self._offset_s += time_s - self.now()
 
     async def sleep_until(self, t: float) -> None:
         delay = (t - self.now()) / self.speed
@@ -85,6 +97,10 @@ class ServiceStats:
     events: list[dict[str, Any]] = field(default_factory=list)
     state: str = "search"
     mcap: str | None = None
+    link: dict[str, int] = field(default_factory=dict)
+    """MAVLink input that never became telemetry: unparsable frames, rejected signatures, drops."""
+    restored_ticks: int | None = None
+    """Mapper ticks restored from the snapshot at start-up (None: started with a flat map)."""
 
     def summary(self) -> dict[str, Any]:
         def pct(values: list[float], q: float) -> float | None:
@@ -95,6 +111,8 @@ class ServiceStats:
             "observations": self.observations,
             "gaps": dict(self.gaps),
             "rejected": dict(self.rejected),
+            "link": dict(self.link),
+            "restored_ticks": self.restored_ticks,
             "setpoints": self.setpoints,
             "unsafe_targets": self.unsafe_targets,
             "latency_ms_median": pct(self.latency_ms, 50),
@@ -138,17 +156,54 @@ class Service:
         self._link: MavlinkLink | None = None
         self._zenoh: ZenohLink | None = None
         self._recorder: Recorder | None = None
+        self._signing_key = (
+            load_signing_key(config.mavlink.signing_key_file) if config.mavlink.signing_key_file else None
+        )
+        self._snapshots: SnapshotWriter | None = None
+        self._fingerprint = fingerprint(config)
+        self._link_problems_logged = 0
+        if config.service.snapshot_path:
+            self._snapshots = SnapshotWriter(config.service.snapshot_path)
+            self._snapshots.check()
+            snapshot = read_snapshot(config.service.snapshot_path, config)
+            if snapshot is not None:
+                self._restore(snapshot)
+
+    def _restore(self, snapshot: Snapshot) -> None:
+        try:
+            self.mapper.restore_state(snapshot.mapper)
+            self.mission.restore_state(snapshot.mission)
+        except (KeyError, TypeError, ValueError) as exc:
+            # a half-restored mapper is worse than a flat one: start again from scratch
+            log.warning("snapshot: not restored (%s), starting with a flat map", exc)
+            self.mapper = mapper_from_config(self.config, self.grid)
+            self.mission = Mission.from_config(self.config, self.grid, self.mapper)
+            return
+        self.clock.resume_at(snapshot.time_s)
+        self.stats.restored_ticks = snapshot.ticks
+        self.stats.state = str(self.mission.state)
+        log.info(
+            "snapshot: restored %d ticks, mission %s, estimate cell %d, map %s", snapshot.ticks,
+            self.mission.state, self.mapper.estimate().cell, map_digest(self.mapper.likelihood),
+        )  # fmt: skip
 
     async def run(self, stop: asyncio.Event) -> ServiceStats:
         """Run until ``stop`` is set; then stop commanding, flush and close everything."""
         cfg = self.config
-        with Recorder(cfg) as recorder:
-            self._recorder = recorder
-            self.stats.mcap = str(recorder.path)
-            async with (
-                ZenohLink.from_config(cfg, self.grid) as zenoh_link,
-                MavlinkLink(cfg.mavlink.url, clock=self.clock.now, queue_size=cfg.mavlink.queue_size) as link,
-            ):
+        link_edge = MavlinkLink(
+            cfg.mavlink.url,
+            clock=self.clock.now,
+            queue_size=cfg.mavlink.queue_size,
+            signing_key=self._signing_key,
+            signing_link_id=cfg.mavlink.signing_link_id,
+        )
+        async with (
+            link_edge as link,
+            ZenohLink.from_config(cfg, self.grid) as zenoh_link,
+        ):
+            with Recorder(cfg) as recorder:  # last: no run file for a service that did not start
+                self._recorder = recorder
+                self.stats.mcap = str(recorder.path)
                 self._zenoh, self._link = zenoh_link, link
                 log.info(
                     "serving vehicle %s: mapper %s, planner %s, grid %d x %d", cfg.vehicle.id,
@@ -170,6 +225,7 @@ class Service:
                 for task in done:
                     if task is not waiter and not task.cancelled() and task.exception() is not None:
                         raise task.exception()  # type: ignore[misc]
+                self._note_link(link)
             log.info("stopped: %s", self.stats.summary())
         return self.stats
 
@@ -216,6 +272,8 @@ class Service:
             self.tick_wall.append((round(deadline, 3), time.time()))
             self.stats.jitter_ms.append(max(0.0, (self.clock.now() - deadline) / self.clock.speed * 1e3))
             self._tick(self.aggregator.close(deadline), started)
+            if self._link is not None:
+                self._note_link(self._link)
             self.stats.tick_ms.append((time.perf_counter() - started) * 1e3)
             deadline += tick_s
             if self.clock.now() > deadline:  # fell behind: skip missed deadlines, do not burst
@@ -252,6 +310,17 @@ class Service:
         self._publish(obs, out)
         for event in out.events:
             self._announce(event)
+        if self._snapshots is not None:
+            self._snapshots.write(
+                Snapshot(
+                    fingerprint=self._fingerprint,
+                    time_s=tick.time_s,
+                    ticks=(self.stats.restored_ticks or 0) + self.stats.observations,
+                    wall_time=time.time(),
+                    mapper=self.mapper.save_state(),
+                    mission=self.mission.save_state(),
+                )
+            )
         now = self.clock.now()
         self._update_gate(now)
         if self._command(now):
@@ -272,6 +341,23 @@ class Service:
                 log.error("zenoh publish failed: %s", exc)
         if self._recorder is not None:
             self._recorder.tick(obs, slim, plume, estimate=out.estimate, state=state, path=path)
+
+    def _note_link(self, link: MavlinkLink) -> None:
+        """Copy the link's counters of input it threw away; one log line when their total grows
+        (at most one per 10 ticks), so a stream of garbage is reported but cannot flood the log."""
+        c = link.counters
+        counts = {"unparsable": c.bad_data, "read_errors": c.read_errors, "dropped": c.dropped}
+        signing = link.signing
+        if signing is not None:
+            counts["unsigned"] = signing.unsigned
+            counts["bad_signature"] = signing.bad_signature
+        self.stats.link = counts
+        total = c.bad_data + c.read_errors + c.dropped
+        if total > self._link_problems_logged and (
+            self._link_problems_logged == 0 or self.stats.ticks % 10 == 0
+        ):
+            log.warning("mavlink: ignored input so far: %s", counts)
+            self._link_problems_logged = total
 
     def _announce(self, event: PlumeFound | PlumeLost | SourceDeclared) -> None:
         if isinstance(event, PlumeFound):

@@ -36,6 +36,9 @@ class MavlinkConfig(_Section):
     altitude_m: float = 0.0
     stream_hz: float = Field(default=5.0, gt=0, le=50.0)
     queue_size: int = Field(default=1000, ge=10)
+    signing_key_file: str = ""
+    """MAVLink 2 signing key (32 bytes raw, or 64 hex digits); empty: signing off."""
+    signing_link_id: int = Field(default=1, ge=0, le=255)
 
     @field_validator("setpoint_type_mask")
     @classmethod
@@ -77,7 +80,8 @@ class SensorConfig(_Section):
     name: str = Field(default="CHEM", min_length=1, max_length=10)
     threshold: float = Field(default=1.0, ge=0)
     detection_probability: float = Field(default=0.9, gt=0, le=1)
-    false_alarm_probability: float = Field(default=0.001, ge=0, lt=1)
+    false_alarm_probability: float = Field(default=0.1, ge=0, lt=1)
+    miss_floor: float = Field(default=0.3, ge=0, lt=1)
     detection_name: str = Field(default="CHEM_DET", min_length=1, max_length=10)
     max_flow_mps: float = Field(default=20.0, gt=0)
 
@@ -91,8 +95,9 @@ class MappingMethod(StrEnum):
 class MappingConfig(_Section):
     method: MappingMethod = Field(default=MappingMethod.POMDP, strict=False)
     window: int = Field(default=50, gt=0, le=10_000)
-    sigma_x: float = Field(default=1.0, gt=0)
-    sigma_y: float = Field(default=1.0, gt=0)
+    sigma_x: float = Field(default=0.2, gt=0)
+    sigma_y: float = Field(default=0.2, gt=0)
+    zero_lag: bool = True
     epsilon_d: float = Field(default=0.2, gt=0, lt=1)
     epsilon_c: float = Field(default=0.02, gt=0, lt=1)
     tick_s: float = Field(default=1.0, gt=0, le=60)
@@ -107,6 +112,7 @@ class PlanningMethod(StrEnum):
     MLDP_PATH = "mldp-path"
     APF = "apf"
     INFOTAXIS = "infotaxis"
+    SURGE_CAST = "surge-cast"
 
 
 class PlanningConfig(_Section):
@@ -120,6 +126,7 @@ class PlanningConfig(_Section):
     cast_width_m: float = Field(default=10.0, gt=0)
     cast_legs: int = Field(default=4, ge=0, le=100)
     lost_after_s: float = Field(default=20.0, gt=0)
+    surge_step_m: float = Field(default=5.0, gt=0)
 
 
 class DeclarationRule(StrEnum):
@@ -132,12 +139,12 @@ class DeclarationRule(StrEnum):
 class DeclarationConfig(_Section):
     # TOML gives strings: the items (not only the list) must accept them
     rules: list[Annotated[DeclarationRule, Strict(False)]] = Field(
-        default_factory=lambda: [DeclarationRule.STABLE, DeclarationRule.MASS], min_length=1
+        default_factory=lambda: [DeclarationRule.MASS], min_length=1
     )
     stable_s: float = Field(default=30.0, gt=0)
-    probability: float = Field(default=0.5, gt=0, le=1)
-    radius_m: float = Field(default=5.0, ge=0)
-    visit_radius_m: float = Field(default=5.0, gt=0)
+    probability: float = Field(default=0.8, gt=0, le=1)
+    radius_m: float = Field(default=3.0, ge=0)
+    visit_radius_m: float = Field(default=3.0, gt=0)
 
 
 class ZenohConfig(_Section):
@@ -154,6 +161,11 @@ class RecorderConfig(_Section):
     dir: str = Field(default="runs", min_length=1)
 
 
+class ServiceConfig(_Section):
+    snapshot_path: str = ""
+    """Map state written atomically every tick and restored at start-up; empty: no snapshot."""
+
+
 class Config(_Section):
     vehicle: VehicleConfig = Field(default_factory=VehicleConfig)
     mavlink: MavlinkConfig = Field(default_factory=MavlinkConfig)
@@ -164,6 +176,7 @@ class Config(_Section):
     declaration: DeclarationConfig = Field(default_factory=DeclarationConfig)
     zenoh: ZenohConfig = Field(default_factory=ZenohConfig)
     recorder: RecorderConfig = Field(default_factory=RecorderConfig)
+    service: ServiceConfig = Field(default_factory=ServiceConfig)
 
 
 def parse_override(text: str) -> tuple[list[str], Any]:

@@ -27,7 +27,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from enum import StrEnum
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from service.config import DeclarationConfig, DeclarationRule, PlanningConfig
 from service.errors import NoPathError
@@ -38,7 +38,7 @@ from service.planning.cast import cast_vertices
 from service.planning.crossflow import FlowFrame
 from service.planning.declaration import Declarer
 from service.planning.reach import Reachability
-from service.planning.safety import clamped_cell, safe_plan
+from service.planning.safety import clamped_cell, safe_plan, segment_clear
 from service.planning.zigzag import zigzag_vertices
 
 if TYPE_CHECKING:
@@ -50,6 +50,12 @@ if TYPE_CHECKING:
 
 SWEEP_REDRAW_RAD = math.pi / 4.0
 """A zigzag is laid out anew when the flow has turned more than this since it was laid out."""
+
+
+UPFLOW_PROBES: tuple[tuple[int, int], ...] = tuple(
+    (d_row, d_col) for d_row in (-1, 0, 1) for d_col in (-1, 0, 1) if (d_row, d_col) != (0, 0)
+)
+"""(row, column) offsets of the eight neighbours a probe upflow chooses from."""
 
 
 class MissionState(StrEnum):
@@ -149,6 +155,29 @@ class Mission:
     def state(self) -> MissionState:
         return self._state
 
+    def save_state(self) -> dict[str, float | str | None]:
+        """The phase and detection memory (for the restart snapshot; the mapper saves its own)."""
+        detection = self._last_detection
+        return {
+            "phase": str(self._state),
+            "last_time": self._last_time,
+            "last_detection_t": None if detection is None else detection[0],
+            "last_detection_x": None if detection is None else detection[1],
+            "last_detection_y": None if detection is None else detection[2],
+        }
+
+    def restore_state(self, state: dict[str, Any]) -> None:
+        """Continue in the phase ``save_state`` saved; a sweep or cast pattern is laid out anew,
+        and past the first detection the declaration rules are re-armed from the restored map."""
+        phase = MissionState(state["phase"])
+        self._last_time = None if state["last_time"] is None else float(state["last_time"])
+        t = state["last_detection_t"]
+        x, y = state["last_detection_x"], state["last_detection_y"]
+        self._last_detection = None if t is None else (float(t), float(x), float(y))
+        self._state = phase
+        if phase is not MissionState.FIND and self._last_time is not None:
+            self._declarer.arm(self._last_time, self.mapper.likelihood)
+
     def step(self, obs: Observation, vehicle: VehicleState) -> MissionOutput:
         """Fuse this tick's observation, move the state machine on, and plan."""
         if self._last_time is not None and obs.time_s <= self._last_time:
@@ -200,7 +229,7 @@ class Mission:
                 events.append(PlumeLost(t, x_last, y_last, t_last))
                 self._enter(MissionState.LOST)
         if self._declarer.armed:
-            found = self._declarer.update(t, self.mapper.likelihood)
+            found = self._declarer.update(t, self.mapper.likelihood, (obs.x, obs.y))
             if found is not None:
                 events.append(
                     SourceDeclared(
@@ -246,7 +275,36 @@ class Mission:
         self._pattern_index = 0
 
     def _trace(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
+        if ctx.goal == ctx.cell:
+            # at the estimate and not yet declared: staying put only repeats one observation
+            # (odour there is explained as well by any source upflow), so probe the cell upflow:
+            # odour there rules the vehicle's cell out, none there rules the cells upflow out
+            probe = self._upflow_neighbour(ctx.cell)
+            if probe is not None:
+                return self._route(self._router, replace(ctx, goal=probe))
         return self._route(self.planner, ctx)
+
+    def _upflow_neighbour(self, cell: int) -> int | None:
+        """The free neighbour of ``cell`` most nearly upflow (against the mean flow), if any."""
+        if self._frame is None:
+            return None
+        grid = self.grid
+        row, col = grid.row_col(cell)
+        cx, cy = grid.centre(cell)
+        best, best_cos = None, 0.0
+        for d_row, d_col in UPFLOW_PROBES:
+            r, c = row + d_row, col + d_col
+            if not (0 <= r < grid.rows and 0 <= c < grid.columns):
+                continue
+            neighbour = r * grid.columns + c
+            if grid.obstacle_mask.flat[neighbour]:
+                continue
+            nx, ny = grid.centre(neighbour)
+            dx, dy = nx - cx, ny - cy
+            cos = -(dx * self._frame.ux + dy * self._frame.uy) / math.hypot(dx, dy)
+            if cos > best_cos + 1e-9:
+                best, best_cos = neighbour, cos
+        return best
 
     def _lost(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
         wanted = self._follow_pattern(ctx)
@@ -265,6 +323,11 @@ class Mission:
             vertex = self._pattern[self._pattern_index]
             target = self._reach.goal_for(ctx.cell, self.grid.cell_of(vertex.x, vertex.y))
             if target != ctx.cell:
+                if segment_clear(self.grid, (ctx.vehicle.x, ctx.vehicle.y), (vertex.x, vertex.y)):
+                    # a clear leg is flown straight: A*'s cell staircase would put the diagonal
+                    # part of a sweep leg anywhere along it, and a leg that first runs along the
+                    # previous one sweeps nothing new
+                    return (vertex,)
                 return self._route(self._router, replace(ctx, goal=target))
             self._pattern_index += 1
         return None

@@ -32,6 +32,7 @@ from typing import Any, Self
 
 from service import mavlink_dialect
 from service.errors import ConfigError, LinkError
+from service.signing import SigningCounters, enable_signing
 from sim_bridge.autopilot import AUTOPILOTS, Autopilot, VehicleKind
 from sim_bridge.world import World
 
@@ -84,6 +85,9 @@ class StubOptions:
     """Start-up stream rates; missing streams take DEFAULT_RATES_HZ."""
     sensor_name: str = "CHEM"
     detection_name: str = "CHEM_DET"
+    signing_key: bytes | None = field(default=None, repr=False)
+    """MAVLink 2 signing key (32 bytes): sign all we send, ignore unsigned or wrongly signed input."""
+    signing_link_id: int = 0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.speed) and self.speed > 0):
@@ -197,6 +201,8 @@ class VehicleStub:
             )
         except (OSError, ValueError) as exc:
             raise LinkError(f"stub cannot open {self.options.url}: {exc}") from exc
+        if self.options.signing_key is not None:
+            enable_signing(self._conn, self.options.signing_key, self.options.signing_link_id)
         loop = asyncio.get_running_loop()
         self._changed = asyncio.Condition()
         fd = getattr(self._conn, "fd", None)
@@ -240,6 +246,13 @@ class VehicleStub:
     @property
     def guided(self) -> bool:
         return self._mode == self._autopilot.guided
+
+    @property
+    def signing(self) -> SigningCounters | None:
+        """Signature checks of what the stub received; None when signing is off."""
+        if self.options.signing_key is None or self._conn is None:
+            return None
+        return SigningCounters.of(self._conn)
 
     def status(self) -> StubStatus:
         v = self.world.vehicle

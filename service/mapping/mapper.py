@@ -12,13 +12,13 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections import deque
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from service.mapping.belief import FloatArray, entropy_nats
 from service.mapping.plume import advance_plume
-from service.transport import Transition, transition
+from service.transport import AxisKernel, Transition, transition
 
 if TYPE_CHECKING:
     from service.config import Config
@@ -39,6 +39,14 @@ class MapperParams:
     """P(detect | detectable odour in the cell): the papers' mu."""
     false_alarm: float = 0.001
     """P(detect | no odour): keeps a single spurious hit from zeroing the true cell."""
+    zero_lag: bool = False
+    """Count the filament released at the current tick (lag 0, at its source) besides the
+    window's (Bayesian and POMDP mappers; False: the papers' release times)."""
+    miss_floor: float = 0.0
+    """P(no detection | odour predicted in the vehicle's cell) never falls below this (0: the
+    papers' models). A plume narrower than a cell, or intermittent, can leave a vehicle in a
+    cell it crosses dry; without a floor one such non-detection all but rules out every source
+    whose filaments the model puts there (Bayesian and POMDP mappers)."""
     epsilon_d: float = 0.2
     """HMM pi adaptation gain on a detection (seed hmm-plume-mapping §IV-B1)."""
     epsilon_c: float = 0.02
@@ -51,6 +59,8 @@ class MapperParams:
             raise ValueError(f"window must be >= 1, got {self.window}")
         if not (0 < self.mu <= 1 and 0 <= self.false_alarm < 1):
             raise ValueError(f"need 0 < mu <= 1 and 0 <= false_alarm < 1, got {self.mu}, {self.false_alarm}")
+        if not 0 <= self.miss_floor < 1:
+            raise ValueError(f"miss_floor must be in [0, 1), got {self.miss_floor}")
         if not (0 < self.epsilon_d < 1 and 0 < self.epsilon_c < 1):
             raise ValueError("epsilon_d and epsilon_c must be in (0, 1)")
 
@@ -63,6 +73,8 @@ class MapperParams:
             sigma_y=m.sigma_y,
             mu=s.detection_probability,
             false_alarm=s.false_alarm_probability,
+            miss_floor=s.miss_floor,
+            zero_lag=m.zero_lag,
             epsilon_d=m.epsilon_d,
             epsilon_c=m.epsilon_c,
             tick_s=m.tick_s,
@@ -156,6 +168,50 @@ class SourceMapper(ABC):
             return False
         self._assimilate(self.grid.cell_of(obs.x, obs.y), obs.detected)
         return True
+
+    def save_state(self) -> dict[str, Any]:
+        """Everything ``update`` has accumulated, as arrays (for the restart snapshot). Restoring it
+        into a mapper of the same class, grid and parameters gives bit-for-bit the same maps."""
+        steps = list(self.history)
+        return {
+            "pi": self._pi.copy(),
+            "alpha": self._alpha.copy(),
+            "ticks": np.array(self._ticks),
+            "last_time": np.array(np.nan if self._last_time is None else self._last_time),
+            # per step: x kernel (lower, stay, higher), y kernel, then dx_m, dy_m, dt_s
+            "history": np.array(
+                [[*s.transition.x.weights, *s.transition.y.weights, s.dx_m, s.dy_m, s.dt_s] for s in steps],
+                dtype=float,
+            ).reshape(len(steps), 9),
+            "substeps": np.array([s.transition.substeps for s in steps], dtype=np.int64),
+        }
+
+    def restore_state(self, state: dict[str, Any]) -> None:
+        """Load what ``save_state`` returned; ValueError (nothing changed) if it does not fit this grid."""
+        pi = np.asarray(state["pi"], dtype=float)
+        alpha = np.asarray(state["alpha"], dtype=float)
+        history = np.asarray(state["history"], dtype=float)
+        substeps = np.asarray(state["substeps"], dtype=np.int64)
+        if pi.shape != self.grid.shape or alpha.shape != self.grid.shape:
+            raise ValueError(f"map shape {pi.shape} does not fit the grid {self.grid.shape}")
+        if not (np.isfinite(pi).all() and np.isfinite(alpha).all() and abs(pi.sum() - 1.0) < 1e-6):
+            raise ValueError("the map is not a finite, normalised distribution")
+        if history.ndim != 2 or history.shape[1] != 9 or substeps.shape != (history.shape[0],):
+            raise ValueError("malformed flow history")
+        steps = [
+            FlowStep(
+                Transition(AxisKernel(*row[0:3]), AxisKernel(*row[3:6]), int(n)),
+                float(row[6]),
+                float(row[7]),
+                float(row[8]),
+            )
+            for row, n in zip(history, substeps, strict=True)
+        ]
+        last_time = float(state["last_time"])
+        self._pi, self._alpha = pi.copy(), alpha.copy()
+        self._ticks = int(state["ticks"])
+        self._last_time = None if np.isnan(last_time) else last_time
+        self.history = deque(steps[-self.params.window :], maxlen=self.params.window)
 
     def _ignore(self, reason: str) -> None:
         self.ignored[reason] = self.ignored.get(reason, 0) + 1
