@@ -16,6 +16,7 @@ COMMANDS: dict[str, str] = {
     "serve": "service.app",
     "sim": "service.sim",
     "stub": "sim_bridge.stub_command",
+    "sitl-bridge": "sim_bridge.sitl_bridge_command",
     "replay": "service.replay",
 }
 

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from typing import Any
 
-from service.bench import mapping
+from service.bench import mapping, search
+from sim_bridge.scenarios import load_scenario
 
 
 def add_parser(subparsers: Any, name: str) -> None:
@@ -21,10 +23,44 @@ def add_parser(subparsers: Any, name: str) -> None:
     m.add_argument("--window", type=int, default=200, help="flow-history window, ticks (default 200)")
     m.add_argument("--ticks", type=int, default=None, help="timed ticks per configuration")
 
+    s = kinds.add_parser("search", help="seeded closed-loop missions: success rate and time to the source")
+    s.add_argument("--scenario", required=True, help="scenario name (config/scenarios) or TOML path")
+    s.add_argument(
+        "--mapper", action="append", dest="mappers", help="mapper (repeat, or 'all'; default: the scenario's)"
+    )
+    s.add_argument(
+        "--planner",
+        action="append",
+        dest="planners",
+        help="planner (repeat, or 'all'; default: the scenario's)",
+    )
+    s.add_argument(
+        "--runs", type=int, default=20, help="missions per configuration, seeds 0..N-1 (default 20)"
+    )
+    s.add_argument("--jobs", type=int, default=None, help="worker processes (default: the cores)")
+    s.add_argument(
+        "--max-time",
+        type=float,
+        default=search.DEFAULT_MAX_TIME_S,
+        help="mission time limit, s (default 300)",
+    )
+    s.add_argument("--set", action="append", default=[], dest="overrides", metavar="KEY=VALUE",
+                   help="override a scenario key (e.g. declaration.probability=0.9)")  # fmt: skip
+    s.add_argument("--json", action="store_true", help="one JSON object per configuration")
+    s.add_argument("--report", metavar="DIR", help="also write report.md and PNG pictures of a mission here")
+
+    p = kinds.add_parser("plume", help="filament plume model: steps per second at a puff count")
+    p.add_argument("--puffs", type=int, default=10_000, help="live puffs at steady state (default 10000)")
+    p.add_argument("--json", action="store_true", help="one JSON object")
+
 
 def run(args: argparse.Namespace) -> int:
     if args.bench == "mapping":
         return _run_mapping(args)
+    if args.bench == "search":
+        return _run_search(args)
+    if args.bench == "plume":
+        return _run_plume(args)
     raise AssertionError(args.bench)
 
 
@@ -47,4 +83,75 @@ def _run_mapping(args: argparse.Namespace) -> int:
         print(json.dumps({"limit": "memory_bandwidth", "gb_per_s": bandwidth}))
     else:
         print(f"memory bandwidth (numpy copy, read + write): {bandwidth:.2f} GB/s")
+    return 0
+
+
+def _fmt(value: float | None, spec: str) -> str:
+    return "never" if value is None else format(value, spec)
+
+
+def _run_search(args: argparse.Namespace) -> int:
+    scenario = load_scenario(args.scenario, args.overrides)
+    mappers = search.expand(args.mappers, search.mapper_names(), str(scenario.config.mapping.method))
+    planners = search.expand(args.planners, search.planner_names(), str(scenario.config.planning.method))
+    if not args.json:
+        print(
+            f"{scenario.name}: {args.runs} runs per configuration, limit {args.max_time:g} s; "
+            "times: failed runs count as never",
+            flush=True,
+        )
+        print(
+            f"{'mapper':<7}{'planner':<12}{'runs':>5}{'success':>9}{'median s':>10}{'p90 s':>8}"
+            f"{'path m':>8}{'wrong':>7}{'none':>6}",
+            flush=True,
+        )
+    summaries = []
+    results: dict[tuple[str, str], list[search.MissionResult]] = {}
+    for summary, batch in search.run_configurations(
+        args.scenario, mappers, planners, args.runs, jobs=args.jobs, max_time_s=args.max_time,
+        overrides=args.overrides,
+    ):  # fmt: skip
+        summaries.append(summary)
+        results[summary.mapper, summary.planner] = batch
+        if args.json:
+            print(json.dumps(summary.as_row()), flush=True)
+        else:
+            print(
+                f"{summary.mapper:<7}{summary.planner:<12}{summary.runs:>5}{summary.success_rate:>9.1%}"
+                f"{_fmt(summary.median_time_s, '.0f'):>10}{_fmt(summary.p90_time_s, '.0f'):>8}"
+                f"{summary.median_path_m:>8.0f}{summary.wrong_declarations:>7}{summary.undeclared:>6}",
+                flush=True,
+            )
+    if args.report:
+        from service.bench import report  # matplotlib is optional: only the report needs it
+
+        best = max(summaries, key=report.rank)
+        written = report.write_report(
+            args.report,
+            args.scenario,
+            summaries,
+            best,
+            results=results[best.mapper, best.planner],
+            overrides=args.overrides,
+            max_time_s=args.max_time,
+        )
+        if not args.json:
+            print(f"report: {written}", flush=True)
+    return 0
+
+
+def _run_plume(args: argparse.Namespace) -> int:
+    from sim_bridge.plume_bench import measure_plume
+
+    result = measure_plume(puffs=args.puffs)
+    row = dataclasses.asdict(result)
+    if args.json:
+        print(json.dumps(row))
+    else:
+        print(
+            f"plume: {result.live_puffs} live puffs, dt {result.dt_s:g} s: "
+            f"{result.median_step_ms:.2f} ms per step, "
+            f"{result.steps_per_s:.0f} steps/s, real-time factor {result.real_time_factor:.1f} "
+            f"(slowest repeat {result.worst_real_time_factor:.1f})"
+        )
     return 0

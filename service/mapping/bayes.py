@@ -34,7 +34,7 @@ class BayesMapper(SourceMapper):
     def event_likelihood(self, cell: int) -> FloatArray:
         """L_i of eq. 5 for a vehicle in flat cell ``cell``: expected filaments there, shape (n, m)."""
         p = self.params
-        px, py = history_factors(self.grid, cell, self.history, p.sigma_x, p.sigma_y)
+        px, py = history_factors(self.grid, cell, self.history, p.sigma_x, p.sigma_y, zero_lag=p.zero_lag)
         # eq. 5: pi_i = sum_l P_i(t_l), with P_i(t_l) = py_l(row) px_l(col)
         out: FloatArray = py.T @ px
         return out
@@ -45,7 +45,8 @@ class BayesMapper(SourceMapper):
     def _event_probability(self, cell: int, detected: bool) -> FloatArray:
         """P(d | i) = pf + (1 - pf) mu q_i, or P(no d | i) = (1 - pf)(1 - mu q_i), shape (n, m)."""
         p = self.params
-        seen = p.mu * np.minimum(self.event_likelihood(cell), 1.0)
+        # the miss floor r caps what odour in the cell promises: P(no d | i) >= (1 - pf) r
+        seen = (1.0 - p.miss_floor) * p.mu * np.minimum(self.event_likelihood(cell), 1.0)
         out: FloatArray = (
             p.false_alarm + (1.0 - p.false_alarm) * seen if detected else (1.0 - p.false_alarm) * (1.0 - seen)
         )

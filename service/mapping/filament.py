@@ -88,9 +88,21 @@ def filament_factors(
 
 
 def history_factors(
-    grid: Grid, cell: int, history: Iterable[FlowStep], sigma_x: float, sigma_y: float
+    grid: Grid,
+    cell: int,
+    history: Iterable[FlowStep],
+    sigma_x: float,
+    sigma_y: float,
+    *,
+    zero_lag: bool = False,
 ) -> tuple[FloatArray, FloatArray]:
-    """``filament_factors`` for flat cell ``cell`` over every release time in ``history``."""
+    """``filament_factors`` for flat cell ``cell`` over every release time in ``history``; with
+    ``zero_lag`` also the release of this very tick (lag 0, still at its source: the first row)."""
     lag, drift_x, drift_y = release_offsets(history)
+    if zero_lag:
+        # a continuous source has odour at its own position now; the papers' releases stop at the
+        # previous tick, so a vehicle in the source's cell would need last tick's filament not to
+        # have left the cell (it often has, at 1 m/s in a 2.5 m cell) to expect a detection
+        lag, drift_x, drift_y = (np.concatenate([[0.0], a]) for a in (lag, drift_x, drift_y))
     x, y = grid.centre(cell)
     return filament_factors(grid, x, y, lag, drift_x, drift_y, sigma_x, sigma_y)

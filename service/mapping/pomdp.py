@@ -102,15 +102,20 @@ class PomdpMapper(SourceMapper):
     def log_gamma(self, cell: int) -> FloatArray:
         """log gamma_ij (eq. 2) for a vehicle in flat cell ``cell``, over the window, shape (n, m)."""
         p = self.params
-        px, py = history_factors(self.grid, cell, self.history, p.sigma_x, p.sigma_y)
+        px, py = history_factors(self.grid, cell, self.history, p.sigma_x, p.sigma_y, zero_lag=p.zero_lag)
         return log_non_detection(px, py, p.mu)
 
     def detection_likelihood(self, cell: int) -> FloatArray:
         return self._event_probability(cell, detected=True)
 
     def _event_probability(self, cell: int, detected: bool) -> FloatArray:
-        """O(d) = 1 - (1 - pf) gamma or O(no d) = (1 - pf) gamma (eq. 3 with false alarms)."""
-        log_miss = np.log1p(-self.params.false_alarm) + self.log_gamma(cell)
+        """O(d) = 1 - (1 - pf) gamma' or O(no d) = (1 - pf) gamma' (eq. 3 with false alarms), where
+        gamma' = r + (1 - r) gamma with r the miss floor (gamma' = gamma, the paper's, for r = 0)."""
+        p = self.params
+        log_gamma = self.log_gamma(cell)
+        if p.miss_floor > 0.0:
+            log_gamma = np.log(p.miss_floor + (1.0 - p.miss_floor) * np.exp(log_gamma))
+        log_miss = np.log1p(-p.false_alarm) + log_gamma
         out: FloatArray = -np.expm1(log_miss) if detected else np.exp(log_miss)
         return out
 

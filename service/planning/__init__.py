@@ -14,6 +14,7 @@ from service.planning.astar import AStarPlanner, PaperAStarPlanner
 from service.planning.base import Plan, PlanContext, Planner, PlannerFactory, VehicleState, Waypoint
 from service.planning.infotaxis import InfotaxisPlanner
 from service.planning.mldp import MldpPathPlanner, MldpPlanner
+from service.planning.surge_cast import SurgeCastPlanner
 
 if TYPE_CHECKING:
     from service.config import PlanningConfig
@@ -26,6 +27,7 @@ PLANNERS: dict[str, PlannerFactory] = {
     MldpPathPlanner.name: MldpPathPlanner,
     ApfPlanner.name: ApfPlanner,
     InfotaxisPlanner.name: InfotaxisPlanner,
+    SurgeCastPlanner.name: SurgeCastPlanner,
 }
 
 

@@ -11,12 +11,21 @@ likelihood map does not change over 30 seconds" (``stable_s``).
 map is, so it neither waits out a map that is already sure nor declares a flat map whose argmax
 happens not to move.
 
+Both rules are gated by a visit: a rule only fires while the vehicle is within
+``visit_radius_m`` of the estimated cell's centre (when the mission passes the vehicle's
+position). A map fed only by detections far downflow is peaked across the flow but not along
+it: every cell upflow of the detections within the flow-history window explains them, and the
+argmax can sit still, or gather mass, anywhere along that line. Only observations at the
+estimate itself (odour just downflow of a true source, none just upflow of it) tell the cells
+of that line apart, so the vehicle has to have reached the estimate before it is named.
+
 The estimate is the cell of greatest likelihood (the mapper's ``estimate``); ties go to the
 lowest flat index, as ``numpy.argmax`` does.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -76,13 +85,21 @@ class Declarer:
         self._cell = int(np.argmax(likelihood))
         self._since_s = time_s
 
-    def update(self, time_s: float, likelihood: FloatArray) -> Declaration | None:
-        """The declaration if an enabled rule fires at this tick, else None (always None unarmed)."""
+    def update(
+        self, time_s: float, likelihood: FloatArray, vehicle_m: tuple[float, float] | None = None
+    ) -> Declaration | None:
+        """The declaration if an enabled rule fires at this tick, else None (always None unarmed).
+        With ``vehicle_m`` (x, y), nothing fires while the vehicle is farther than
+        ``visit_radius_m`` from the estimated cell's centre."""
         if self._cell is None:
             return None
         cell = int(np.argmax(likelihood))
         if cell != self._cell:
             self._cell, self._since_s = cell, time_s
+        if vehicle_m is not None:
+            cx, cy = self.grid.centre(cell)
+            if math.hypot(vehicle_m[0] - cx, vehicle_m[1] - cy) > self.config.visit_radius_m:
+                return None
         mass = mass_within(self.grid, likelihood, cell, self.config.radius_m)
         fired = {
             # the tolerance keeps ticks like 0.1 s summed in floating point from missing the mark

@@ -196,16 +196,22 @@ def test_reaches_the_estimate_whenever_a_path_exists() -> None:
         mission = Mission(grid, mapper, PlanningConfig(), NEVER)
         x, y = grid.centre(start[0] * grid.columns + start[1])
         vehicle = Vehicle(x, y)
+        visited: set[int] = set()
         for t in range(2 * grid.size + 2):
             obs = Observation(float(t), vehicle.x, vehicle.y, 0.3, 0.1, True)
             out = mission.step(obs, vehicle.state)
             assert mission.state is MissionState.TRACE
             vehicle.follow(out.waypoints)
             vehicle.move()
+            visited.add(grid.cell_of(vehicle.x, vehicle.y))
         reach = bfs(free, start)
         here = grid.cell_of(vehicle.x, vehicle.y)
         if reach.flat[goal]:
-            assert here == goal, f"trial {trial}: stopped in {here}, goal {goal} was reachable"
+            # at the estimate, an undeclared mission probes the neighbour upflow and comes back,
+            # so the vehicle ends at the goal or next to it, having reached it
+            assert goal in visited, f"trial {trial}: never reached goal {goal}, which was reachable"
+            (hr, hc), (gr, gc) = grid.row_col(here), grid.row_col(goal)
+            assert max(abs(hr - gr), abs(hc - gc)) <= 1, f"trial {trial}: stopped in {here}, goal {goal}"
             reached += 1
         else:
             # no path: the mission went to the reachable cell nearest the estimate, without error
@@ -233,7 +239,10 @@ def mission_with(mapper: SourceMapper, **declaration: object) -> Mission:
 def test_find_trace_lose_recover_declare() -> None:
     mapper = ScriptedMapper(AREA)
     mapper.peak_at(SOURCE, 0.05)
-    mission = mission_with(mapper, rules=[DeclarationRule.STABLE], stable_s=30.0)
+    # the rules, not the visit gate, are under test here: the vehicle is far from the estimate
+    mission = mission_with(
+        mapper, rules=[DeclarationRule.STABLE], stable_s=30.0, radius_m=5.0, visit_radius_m=1e6
+    )
     v = VehicleState(90.0, -40.0)
     flow = (1.0, 0.0)
 
@@ -246,7 +255,8 @@ def test_find_trace_lose_recover_declare() -> None:
     assert state is MissionState.FIND
     assert events == ()
     assert wps is not None
-    assert wps[-1].x == pytest.approx(AREA.centre(AREA.cell_of(90.0, 47.0))[0])
+    # a leg clear of obstacles is flown straight to the turning point itself, not along A*'s cells
+    assert wps == (Waypoint(90.0, AREA.y_centres[-1]),)
     assert wps[-1].y == pytest.approx(AREA.y_centres[-1])
     assert tick(1.0)[2] is None  # nothing changed: keep flying
     # the first detection: TRACE toward the estimate
@@ -261,8 +271,8 @@ def test_find_trace_lose_recover_declare() -> None:
     assert state is MissionState.LOST
     assert events == (PlumeLost(15.0, 90.0, -40.0, last_detection_s=5.0),)
     assert wps is not None
-    # the first cast leg: 10 m across the flow (North), to the centre of that cell
-    assert (wps[-1].x, wps[-1].y) == AREA.centre(AREA.cell_of(90.0, -30.0))
+    # the first cast leg: 10 m across the flow (North), flown straight to that turning point
+    assert wps == (Waypoint(90.0, -30.0),)
     # a detection ends LOST
     state, events, _ = tick(20.0, detected=True)
     assert state is MissionState.TRACE
@@ -291,7 +301,9 @@ def test_find_trace_lose_recover_declare() -> None:
 def test_mass_rule_declares_and_says_so() -> None:
     mapper = ScriptedMapper(AREA)
     mapper.peak_at(SOURCE, 0.9)
-    mission = mission_with(mapper, rules=[DeclarationRule.STABLE, DeclarationRule.MASS], probability=0.8)
+    mission = mission_with(
+        mapper, rules=[DeclarationRule.STABLE, DeclarationRule.MASS], probability=0.8, visit_radius_m=1e6
+    )
     v = VehicleState(50.0, 0.0)
     out = mission.step(Observation(0.0, v.x, v.y, 1.0, 0.0, False), v)
     assert out.state is MissionState.FIND  # no rule is judged before the first detection
@@ -301,6 +313,20 @@ def test_mass_rule_declares_and_says_so() -> None:
     assert isinstance(found, PlumeFound)
     assert isinstance(declared, SourceDeclared)
     assert declared.rules == (DeclarationRule.MASS,)
+
+
+def test_no_rule_fires_before_the_vehicle_visits_the_estimate() -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.9)
+    mission = mission_with(mapper, rules=[DeclarationRule.MASS], probability=0.8, visit_radius_m=3.0)
+    far = VehicleState(50.0, 0.0)
+    sx, sy = AREA.centre(SOURCE)
+    assert math.dist((far.x, far.y), (sx, sy)) > 3.0
+    mission.step(Observation(0.0, far.x, far.y, 1.0, 0.0, True), far)
+    assert mission.state is MissionState.TRACE  # the map is sure, but nobody has looked there
+    near = VehicleState(sx + 2.0, sy)
+    out = mission.step(Observation(1.0, near.x, near.y, 1.0, 0.0, True), near)
+    assert out.state is MissionState.DECLARED
 
 
 def test_time_comes_only_from_the_observation() -> None:

@@ -1,0 +1,122 @@
+"""The search benchmark: the in-process closed loop, its statistics and its command line."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from service.bench import search
+from service.bench.search import MissionResult, run_mission, summarise, within_one_cell
+from service.cli import main
+from service.errors import ConfigError
+from service.grid import Grid
+
+GRID = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25)  # 2.5 x 4 m cells
+
+
+def result(
+    seed: int, *, declared: bool, correct: bool, time_s: float, path_m: float = 100.0
+) -> MissionResult:
+    x = 0.0 if declared else None
+    return MissionResult(
+        seed, 0.0, 0.0, declared, correct, time_s, x, x, 0.0 if declared else None, path_m, None
+    )
+
+
+def test_within_one_cell_is_the_cell_and_its_eight_neighbours() -> None:
+    sx, sy = GRID.centre(GRID.cell_of(18.75, 4.0))
+    assert within_one_cell(GRID, sx + 2.5, sy - 4.0, sx, sy)  # diagonal neighbour
+    assert not within_one_cell(GRID, sx + 5.0, sy, sx, sy)  # two columns away
+    assert not within_one_cell(GRID, sx, sy + 8.0, sx, sy)  # two rows away
+
+
+def test_summary_counts_failures_as_never() -> None:
+    runs = [
+        result(0, declared=True, correct=True, time_s=100.0, path_m=200.0),
+        result(1, declared=True, correct=True, time_s=120.0, path_m=220.0),
+        result(2, declared=True, correct=False, time_s=50.0, path_m=90.0),  # wrong: not a success
+        result(3, declared=False, correct=False, time_s=300.0, path_m=500.0),
+    ]
+    s = summarise("x", "pomdp", "astar", runs, 300.0)
+    assert s.runs == 4
+    assert s.success_rate == 0.5
+    assert s.wrong_declarations == 1
+    assert s.undeclared == 1
+    assert s.median_time_s == 120.0  # sorted: 100, 120, never, never; the lower median
+    assert s.p90_time_s is None  # the 90th percentile is a failure
+    assert s.median_path_m == pytest.approx(210.0)
+
+
+def test_all_and_repeated_names() -> None:
+    assert search.expand(["all"], ["a", "b"], "a") == ["a", "b"]
+    assert search.expand(None, ["a", "b"], "b") == ["b"]
+    assert search.expand(["b", "a", "b"], ["a", "b"], "a") == ["b", "a"]
+    with pytest.raises(ConfigError, match="unknown"):
+        search.expand(["c"], ["a", "b"], "a")
+    assert "surge-cast" in search.planner_names()
+
+
+@pytest.mark.parametrize("scenario", ["wang-laminar", "wang-turbulent"])
+def test_a_seeded_mission_finds_the_source(scenario: str) -> None:
+    configured = search.configure(scenario, "pomdp", "astar")
+    r = run_mission(configured, 0, record=True)
+    assert r.declared
+    assert r.correct
+    assert r.error_m is not None
+    assert r.error_m <= math.hypot(2.5, 4.0)
+    assert r.first_detection_s is not None
+    assert r.first_detection_s < r.time_s <= 300.0
+    # the vehicle flies at 2 m/s: the path cannot be longer than that allows
+    assert 0.0 < r.path_m <= 2.0 * r.time_s + 1e-6
+    assert r.trace is not None
+    assert r.trace.track[-1].time_s == r.time_s
+    # the same seed gives the same mission
+    again = run_mission(configured, 0)
+    assert (again.time_s, again.declared_x, again.path_m) == (r.time_s, r.declared_x, r.path_m)
+
+
+def test_surge_cast_baseline_runs_without_the_map() -> None:
+    configured = search.configure("wang-turbulent", "pomdp", "surge-cast")
+    r = run_mission(configured, 0, max_time_s=60.0)
+    assert r.time_s <= 60.0
+    assert r.path_m > 0.0
+
+
+def test_command_prints_one_json_object_per_configuration(capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(
+        ["bench", "search", "--scenario", "wang-turbulent", "--mapper", "pomdp", "--planner", "astar",
+         "--planner", "surge-cast", "--runs", "2", "--jobs", "1", "--max-time", "40", "--json"]
+    )  # fmt: skip
+    assert code == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.startswith("{")]
+    assert [r["planner"] for r in rows] == ["astar", "surge-cast"]
+    for row in rows:
+        assert list(row)[: len(search.JSON_KEYS)] == list(search.JSON_KEYS)
+        assert row["runs"] == 2
+        assert 0.0 <= row["success_rate"] <= 1.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("scenario", "paper_best_s"), [("wang-laminar", 121.0), ("wang-turbulent", 140.0)])
+def test_targets_of_issue_6(scenario: str, paper_best_s: float) -> None:
+    ((summary, _),) = search.run_configurations(scenario, ["pomdp"], ["astar"], 200)
+    assert summary.success_rate >= 0.95
+    assert summary.median_time_s is not None
+    assert summary.median_time_s < paper_best_s
+    assert summary.wrong_declarations <= 2
+
+
+def test_report_sets_the_papers_figures_beside_ours() -> None:
+    from service.bench.report import markdown
+
+    s = summarise(
+        "wang-laminar", "pomdp", "astar", [result(0, declared=True, correct=True, time_s=99.0)], 300.0
+    )
+    text = markdown("wang-laminar", [s], ["declaration.probability=0.9"], 300.0)
+    assert "pomdp 135 s, hmm 160 s, bayes 121 s" in text
+    assert "| pomdp | astar | 1 | 100.0% | 99 |" in text
+    assert "| 135 |" in text
+    assert "declaration.probability=0.9" in text
+    assert "typically less than 300 s" in markdown("farrell2003", [s], [], 300.0)
