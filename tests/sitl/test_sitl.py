@@ -1,0 +1,180 @@
+"""The service and ``oslim sitl-bridge`` against ArduPilot Rover SITL (marked ``sitl``; see conftest)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import socket
+import time
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from service.app import Service
+from service.config import Config, load_config
+from service.sim import within_one_cell
+from sim_bridge.scenarios import build_world, load_scenario
+from sim_bridge.sitl_bridge import BridgeOptions, SitlBridge
+
+pytestmark = pytest.mark.sitl
+ROVER_GUIDED, ROVER_HOLD = 15, 4
+Sitl = Any  # the conftest's Sitl: instance, workdir, pilot, companion_port
+
+
+def free_port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+def service_config(base: Config, url: str, recorder_dir: Path) -> Config:
+    """``base`` talking MAVLink on ``url``, Zenoh on loopback only, MCAP under ``recorder_dir``."""
+    return base.model_copy(
+        update={
+            "mavlink": base.mavlink.model_copy(update={"url": url}),
+            "zenoh": base.zenoh.model_copy(
+                update={
+                    "listen": [f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"],
+                    "multicast_scouting": False,
+                }
+            ),
+            "recorder": base.recorder.model_copy(update={"dir": str(recorder_dir)}),
+        }
+    )
+
+
+@asynccontextmanager
+async def running(service: Service) -> AsyncIterator[asyncio.Task[Any]]:
+    stop = asyncio.Event()
+    task = asyncio.create_task(service.run(stop))
+    try:
+        await asyncio.wait_for(service.started.wait(), 30.0)
+        yield task
+    finally:
+        stop.set()
+        await asyncio.wait_for(task, 30.0)
+
+
+async def until(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+        await asyncio.sleep(0.1)
+
+
+def received(service: Service, kind: str) -> int:
+    link = service._link
+    return 0 if link is None else link.counters.by_type.get(kind, 0)
+
+
+def test_lua_script_sends_chem_when_enabled(sitl: Sitl) -> None:
+    pilot = sitl.pilot
+    pilot.param("CHEM_ENABLE", 1)
+    pilot.param("CHEM_RATE", 5)
+    first = pilot.recv("NAMED_VALUE_FLOAT", 10.0, where=lambda m: m.name == "CHEM")
+    stamps = [first.time_boot_ms]
+    while len(stamps) < 6:
+        stamps.append(pilot.recv("NAMED_VALUE_FLOAT", 3.0, where=lambda m: m.name == "CHEM").time_boot_ms)
+    pilot.param("CHEM_ENABLE", 0)
+    assert first.get_srcSystem() == 1
+    assert (stamps[-1] - stamps[0]) / (len(stamps) - 1) == pytest.approx(200.0, abs=40.0)  # 5 Hz
+
+
+def test_streams_guided_armed_gate_and_hold(sitl: Sitl, tmp_path: Path) -> None:
+    pilot = sitl.pilot
+    overrides = ["area.x_min=-50.0", "area.x_max=50.0"]  # SITL starts at its origin: mid-area
+    config = service_config(load_config(None, overrides), f"tcp:127.0.0.1:{sitl.companion_port}", tmp_path)
+
+    async def main() -> dict[str, Any]:
+        service = Service(config)
+        out: dict[str, Any] = {}
+        async with running(service):
+            await until(lambda: received(service, "COMMAND_ACK") >= 3, 15.0, "acks of the stream requests")
+            n0, t0 = received(service, "LOCAL_POSITION_NED"), time.monotonic()
+            await until(lambda: time.monotonic() - t0 >= 4.0, 10.0, "four seconds")
+            out["position_hz"] = (received(service, "LOCAL_POSITION_NED") - n0) / (time.monotonic() - t0)
+            await until(lambda: service.target is not None, 20.0, "a first target")
+            out["setpoints_disarmed"] = service.stats.setpoints
+            await asyncio.to_thread(pilot.mode, ROVER_GUIDED)
+            await until(
+                lambda: service.gate.last is not None and service.gate.last.custom_mode == 15, 5, "GUIDED"
+            )
+            out["setpoints_guided_disarmed"] = service.stats.setpoints
+            start = await asyncio.to_thread(pilot.position)
+            await asyncio.to_thread(pilot.arm)
+            await until(lambda: service.stats.setpoints > 0, 10.0, "setpoints once armed in GUIDED")
+            await until(lambda: service.stats.setpoints >= 10, 20.0, "ten setpoints")
+            moved = await asyncio.to_thread(pilot.position)
+            out["moved_m"] = math.dist(start, moved)
+            await asyncio.to_thread(pilot.mode, ROVER_HOLD)
+            await until(lambda: not service.gate.state(service.clock.now()).allowed, 5.0, "HOLD seen")
+            await asyncio.sleep(0.6)  # a setpoint already on its way may still land
+            held = service.stats.setpoints
+            await asyncio.sleep(3.0)
+            out["setpoints_in_hold"] = service.stats.setpoints - held
+            a = await asyncio.to_thread(pilot.position)
+            await asyncio.sleep(2.0)
+            b = await asyncio.to_thread(pilot.position)
+            out["drift_in_hold_m"] = math.dist(a, b)
+        return out
+
+    out = asyncio.run(main())
+    assert out["position_hz"] >= 4.0  # asked at mavlink.stream_hz = 5
+    assert out["setpoints_disarmed"] == 0
+    assert out["setpoints_guided_disarmed"] == 0
+    assert out["moved_m"] > 1.0  # ArduPilot followed the service's setpoints
+    assert out["setpoints_in_hold"] == 0
+    assert out["drift_in_hold_m"] < 0.5
+
+
+def test_mission_through_sitl_bridge_declares_the_source(sitl: Sitl, tmp_path: Path) -> None:
+    pilot = sitl.pilot
+    scenario = load_scenario("wang-laminar")
+    world = build_world(scenario, seed=1)
+    start = (world.vehicle.x_m, world.vehicle.y_m)
+    source = world.plume.source_m
+    service_port = free_port(socket.SOCK_DGRAM)
+    config = service_config(scenario.config, f"udpin:127.0.0.1:{service_port}", tmp_path)
+    # the pilot brings the rover to the scenario's start, then holds it there
+    pilot.mode(ROVER_GUIDED)
+    pilot.arm()
+    pilot.drive_to(*start)
+    pilot.mode(ROVER_HOLD)
+
+    async def main() -> dict[str, Any]:
+        options = BridgeOptions(
+            sitl_url=f"tcp:127.0.0.1:{sitl.companion_port}",
+            to_url=f"udpout:127.0.0.1:{service_port}",
+            wind_rate_hz=0.0,  # SITL's windvane sends WIND (conftest)
+        )
+        async with SitlBridge(world, options) as bridge:
+            await bridge.wait_for(lambda s: s.position_m is not None and s.chem_sent > 0, 20.0)
+            service = Service(config)
+            async with running(service) as task:
+                await until(lambda: service.gate.last is not None, 10.0, "the autopilot through the bridge")
+                await asyncio.to_thread(pilot.mode, ROVER_GUIDED)  # hand over to the service
+                t0, d0 = service.clock.now(), bridge.status().distance_m
+                await until(lambda: service.declared is not None or task.done(), 900.0, "a declaration")
+                declared = service.declared
+                assert declared is not None
+                await asyncio.to_thread(pilot.mode, ROVER_HOLD)
+                status = bridge.status()
+                return {
+                    "time_s": round(declared.time_s - t0, 1),
+                    "declared": (declared.x, declared.y),
+                    "error_m": round(math.dist((declared.x, declared.y), source), 2),
+                    "path_m": round(status.distance_m - d0, 1),
+                    "dropped": status.from_sitl.dropped,
+                    "setpoints": service.stats.setpoints,
+                }
+
+    out = asyncio.run(main())
+    print("SITL mission:", json.dumps(out))
+    assert within_one_cell(scenario, out["declared"], source)
+    assert out["dropped"] == 0
