@@ -141,6 +141,7 @@ class Service:
             chem_name=config.sensor.name,
             detection_name=config.sensor.detection_name,
             max_flow_mps=config.sensor.max_flow_mps,
+            origin=(config.mavlink.origin[0], config.mavlink.origin[1]) if config.mavlink.origin else None,
         )
         self.stats = ServiceStats()
         self.target: Waypoint | None = None
@@ -256,9 +257,12 @@ class Service:
             now = self.clock.now()
             alive = self.gate.link_alive(now)
             if alive and not self._link_was_alive and self.gate.system is not None:
-                for msg_id in STREAMS.values():
+                streams = dict(STREAMS)
+                if self.settings.origin is not None:
+                    streams["GLOBAL_POSITION_INT"] = 33
+                for msg_id in streams.values():
                     link.request_interval(self.gate.system, msg_id, self.config.mavlink.stream_hz)
-                log.info("autopilot %d heard: requested %s at %.1f Hz", self.gate.system, ", ".join(STREAMS),
+                log.info("autopilot %d heard: requested %s at %.1f Hz", self.gate.system, ", ".join(streams),
                          self.config.mavlink.stream_hz)  # fmt: skip
             self._link_was_alive = alive
             await self.clock.sleep_until(now + 1.0)

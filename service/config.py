@@ -39,6 +39,16 @@ class MavlinkConfig(_Section):
     signing_key_file: str = ""
     """MAVLink 2 signing key (32 bytes raw, or 64 hex digits); empty: signing off."""
     signing_link_id: int = Field(default=1, ge=0, le=255)
+    origin: list[float] = Field(default_factory=list)
+    """[lat_deg, lon_deg] of the autopilot's local origin: enables GLOBAL_POSITION_INT as a position
+    source when no LOCAL_POSITION_NED arrives; empty: GLOBAL_POSITION_INT is ignored."""
+
+    @field_validator("origin")
+    @classmethod
+    def _lat_lon(cls, value: list[float]) -> list[float]:
+        if value and not (len(value) == 2 and -90.0 <= value[0] <= 90.0 and -180.0 <= value[1] <= 180.0):
+            raise ValueError("must be empty or [lat_deg, lon_deg] with |lat| <= 90 and |lon| <= 180")
+        return value
 
     @field_validator("setpoint_type_mask")
     @classmethod

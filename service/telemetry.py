@@ -17,6 +17,9 @@ MAV_AUTOPILOT_INVALID = 8
 NON_VEHICLE_TYPES = frozenset({6, 18, 26, 27, 30})
 """MAV_TYPE of GCS, onboard controller, gimbal, ADS-B, camera: their heartbeats are not the autopilot's."""
 
+EARTH_RADIUS_M = 6_371_008.8
+"""Mean Earth radius (IUGG)."""
+
 POSITION_LIMIT_M = 1.0e6
 """Positions further than this from the origin are corrupt, not merely outside the area."""
 
@@ -37,6 +40,8 @@ class Position:
     time_s: float
     x: float
     y: float
+    local: bool = True
+    """From LOCAL_POSITION_NED (preferred) rather than GLOBAL_POSITION_INT."""
 
 
 @dataclass(frozen=True)
@@ -74,6 +79,8 @@ class TelemetrySettings:
     chem_name: str = "CHEM"
     detection_name: str = "CHEM_DET"
     max_flow_mps: float = 20.0
+    origin: tuple[float, float] | None = None
+    """(lat_deg, lon_deg) of the local origin; None: GLOBAL_POSITION_INT is not used."""
 
 
 def _name(raw: Any) -> str:
@@ -107,6 +114,12 @@ def decode(msg: Any, time_s: float, settings: TelemetrySettings) -> Telemetry | 
         if max(abs(msg.x), abs(msg.y)) > POSITION_LIMIT_M:
             return Rejected(kind, "position beyond 1000 km")
         return Position(time_s, x=float(msg.y), y=float(msg.x))
+    if kind == "GLOBAL_POSITION_INT" and settings.origin is not None:
+        lat, lon = msg.lat * 1e-7, msg.lon * 1e-7
+        if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+            return Rejected(kind, "latitude or longitude out of range")
+        x, y = local_offset_m(settings.origin, (lat, lon))
+        return Position(time_s, x=x, y=y, local=False)
     if kind == "WIND_COV":
         return _flow(kind, time_s, east=msg.wind_y, north=msg.wind_x, settings=settings)
     if kind == "WIND":
@@ -126,6 +139,15 @@ def decode(msg: Any, time_s: float, settings: TelemetrySettings) -> Telemetry | 
             return Rejected(kind, f"detection value {msg.value} is not 0 or 1")
         return DetectionSample(time_s, bool(msg.value))
     return None
+
+
+def local_offset_m(origin: tuple[float, float], point: tuple[float, float]) -> tuple[float, float]:
+    """East and north metres of ``point`` from ``origin`` (both lat, lon degrees), on a local
+    tangent plane: plenty for a search area of a few kilometres."""
+    lat0, lon0 = map(math.radians, origin)
+    lat, lon = map(math.radians, point)
+    dlon = (lon - lon0 + math.pi) % (2.0 * math.pi) - math.pi
+    return EARTH_RADIUS_M * dlon * math.cos(0.5 * (lat + lat0)), EARTH_RADIUS_M * (lat - lat0)
 
 
 def _flow(

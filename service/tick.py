@@ -38,7 +38,13 @@ class TickAggregator:
     def add(self, sample: Position | FlowSample | ChemSample | DetectionSample) -> None:
         self._samples += 1
         if isinstance(sample, Position):
-            self._position = sample
+            # LOCAL_POSITION_NED is preferred: a global fix only stands in while it is stale
+            last = self._position
+            fresh_local = (
+                last is not None and last.local and sample.time_s - last.time_s <= self.max_position_age_s
+            )
+            if sample.local or not fresh_local:
+                self._position = sample
         elif isinstance(sample, FlowSample):
             self._flows.append(sample)
         elif isinstance(sample, ChemSample):

@@ -92,3 +92,26 @@ def test_bad_values_are_rejected_with_a_reason(msg: Any) -> None:
     out = decode(over_the_wire(msg), 0.0, SETTINGS)
     assert isinstance(out, Rejected)
     assert out.reason
+
+
+def test_global_position_needs_an_origin() -> None:
+    msg = over_the_wire(mav.MAVLink_global_position_int_message(0, 473_977_420, 85_455_940, 0, 0, 0, 0, 0, 0))
+    assert decode(msg, 1.0, SETTINGS) is None
+    with_origin = TelemetrySettings(origin=(47.397742, 8.545594))
+    assert decode(msg, 1.0, with_origin) == Position(1.0, x=0.0, y=0.0, local=False)
+
+
+def test_global_position_offsets_east_and_north() -> None:
+    origin = (47.0, 8.0)
+    settings = TelemetrySettings(origin=origin)
+    # 0.001 deg of latitude is 111.2 m north; 0.001 deg of longitude at 47 deg is 75.8 m east
+    msg = over_the_wire(mav.MAVLink_global_position_int_message(0, 470_010_000, 80_010_000, 0, 0, 0, 0, 0, 0))
+    out = decode(msg, 2.0, settings)
+    assert isinstance(out, Position)
+    assert out.y == pytest.approx(6_371_008.8 * math.radians(0.001), rel=1e-9)
+    assert out.x == pytest.approx(
+        6_371_008.8 * math.radians(0.001) * math.cos(math.radians(47.0005)), rel=1e-9
+    )
+    assert not out.local
+    bad = over_the_wire(mav.MAVLink_global_position_int_message(0, 950_000_000, 0, 0, 0, 0, 0, 0, 0))
+    assert isinstance(decode(bad, 2.0, settings), Rejected)

@@ -70,3 +70,20 @@ def test_samples_do_not_leak_into_the_next_tick_and_position_ages_out() -> None:
     agg.add(FlowSample(3.5, 0.0, 2.0))
     agg.add(ChemSample(3.5, 0.0))
     assert agg.close(4.0).gaps == ("position",)  # 3.5 s old
+
+
+def test_local_position_preferred_over_global() -> None:
+    agg = TickAggregator(threshold=1.0, max_position_age_s=2.0)
+    agg.add(Position(0.2, 1.0, 2.0))
+    agg.add(Position(0.5, 50.0, 60.0, local=False))  # ignored: a fresh local fix exists
+    agg.add(FlowSample(0.5, 1.0, 0.0))
+    agg.add(ChemSample(0.5, 0.0))
+    obs = agg.close(1.0).observation
+    assert obs is not None
+    assert (obs.x, obs.y) == (1.0, 2.0)
+    agg.add(Position(3.5, 50.0, 60.0, local=False))  # the local stream went quiet: global stands in
+    agg.add(FlowSample(3.5, 1.0, 0.0))
+    agg.add(ChemSample(3.5, 0.0))
+    obs = agg.close(4.0).observation
+    assert obs is not None
+    assert (obs.x, obs.y) == (50.0, 60.0)
