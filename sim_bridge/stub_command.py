@@ -9,6 +9,7 @@ import logging
 import signal
 from typing import Any
 
+from service.signing import load_signing_key
 from sim_bridge.scenarios import available_scenarios, build_world, load_scenario
 from sim_bridge.stub import DEFAULT_RATES_HZ, Stream, StubOptions, VehicleStub
 
@@ -51,6 +52,11 @@ def add_parser(subparsers: Any, name: str) -> argparse.ArgumentParser:
     parser.add_argument("--no-wind-cov", action="store_true", help="do not stream WIND_COV (PX4's flow)")
     parser.add_argument("--chem-det", action="store_true", help="also stream NAMED_VALUE_INT detections")
     parser.add_argument(
+        "--signing-key-file",
+        default=None,
+        help="MAVLink 2 signing key (32 bytes or 64 hex digits); sign and verify",
+    )
+    parser.add_argument(
         "--duration-s",
         type=float,
         default=None,
@@ -74,6 +80,9 @@ def options_from_args(args: argparse.Namespace, sensor_name: str, kind: Any) -> 
         system_id=args.system_id,
         rates_hz=rates,
         sensor_name=sensor_name,
+        signing_key=load_signing_key(args.signing_key_file, "--signing-key-file")
+        if args.signing_key_file
+        else None,
     )
 
 
