@@ -401,7 +401,7 @@ class RecordingReader:
                             log_time_ns=record.log_time,
                             data=record.data,
                         )
-            except EndOfFile:
+            except (EndOfFile, struct.error):  # struct.error: a closing magic cut part-way
                 if self.complete:
                     raise
                 return  # the cut: everything complete before it has been read
@@ -423,7 +423,8 @@ def _complete_prefix(file: IO[bytes]) -> tuple[int, bool]:
             break
         position = end
         if opcode == Opcode.FOOTER:
-            return min(position + _MAGIC_SIZE, size), True
+            # complete only with the closing magic too; a file cut inside it reads as cut short
+            return min(position + _MAGIC_SIZE, size), position + _MAGIC_SIZE <= size
     return position, False
 
 

@@ -173,6 +173,11 @@ def test_a_file_cut_anywhere_reads_up_to_its_last_complete_record(tmp_path: Path
     assert counts[0] == 0
     assert counts[-1] == len(full)  # the last cuts fall in the summary, after the messages
     assert len(set(counts)) > 10
+    # a cut inside the closing magic: every message is there, but the file is not complete
+    cut.write_bytes(data[:-3])
+    reader = RecordingReader(cut)
+    assert list(reader.messages()) == full
+    assert not reader.complete
 
 
 def test_an_unwritable_directory_is_a_clear_error_at_start(tmp_path: Path) -> None:
