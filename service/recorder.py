@@ -50,7 +50,7 @@ from mcap_protobuf.schema import build_file_descriptor_set
 from service.errors import ConfigError
 from service.grid import Grid
 from service.grid_message import DEFAULT_FRAME_ID, SCHEMA_NAME, grid_payload
-from service.zenoh_link import (
+from service.messages import (
     ESTIMATE_STATES,
     Waypoint,
     estimate_json,

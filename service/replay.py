@@ -26,6 +26,7 @@ from service.errors import OslimError
 from service.grid import Grid
 from service.grid_message import decode_grid
 from service.mapping import mapper_from_config
+from service.messages import observation_from_json
 from service.recorder import (
     CONFIG_TOPIC,
     ESTIMATE_TOPIC,
@@ -35,7 +36,6 @@ from service.recorder import (
     RecordedMessage,
     RecordingReader,
 )
-from service.zenoh_link import observation_from_json
 
 if TYPE_CHECKING:
     from service.mapping import SourceMapper

@@ -14,7 +14,7 @@ each key it asks for. Puts use congestion control DROP so a slow subscriber neve
 asyncio loop. Measured on the 2-core dev machine, one tick (two 100 x 100 grids and three JSON
 puts, a subscriber decoding in another process): 0.4 ms median, 0.9 ms p99, of which 0.03 ms
 is encoding.
-The JSON payload builders are module functions because the recorder writes the same payloads.
+The JSON payloads are built by ``service.messages``, which the recorder shares.
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import math
 import threading
 from collections.abc import Mapping, Sequence
 from types import TracebackType
@@ -33,6 +32,7 @@ import zenoh
 
 from service.errors import ConfigError, LinkError
 from service.grid_message import DEFAULT_FRAME_ID, SCHEMA_NAME, grid_payload
+from service.messages import Waypoint, estimate_json, json_payload, obs_json, path_json
 from service.observation import Observation
 
 if TYPE_CHECKING:
@@ -50,80 +50,10 @@ OBS: Final = "obs"
 KEYS: Final = (SLIM, PLUME, ESTIMATE, PATH, OBS)
 """Key suffixes under ``<key_prefix>/<vehicle_id>/``."""
 
-ESTIMATE_STATES: Final = frozenset({"search", "trace", "lost", "declared"})
-"""Values of the ``state`` key of an estimate (the mission's states)."""
-
-ESTIMATE_KEYS: Final = ("time_s", "state", "cell", "x", "y", "probability", "entropy")
-OBS_KEYS: Final = ("time_s", "x", "y", "flow_x", "flow_y", "detected")
-PATH_KEYS: Final = ("time_s", "waypoints")
-
 GRID_ENCODING: Final = zenoh.Encoding.APPLICATION_PROTOBUF.with_schema(SCHEMA_NAME)
 JSON_ENCODING: Final = zenoh.Encoding.APPLICATION_JSON
 _ENCODINGS: Final = {SLIM: GRID_ENCODING, PLUME: GRID_ENCODING, ESTIMATE: JSON_ENCODING,
                      PATH: JSON_ENCODING, OBS: JSON_ENCODING}  # fmt: skip
-
-JsonObject = dict[str, Any]
-Waypoint = tuple[float, float]
-
-
-def _finite(name: str, value: float) -> float:
-    number = float(value)
-    if not math.isfinite(number):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    return number
-
-
-def obs_json(obs: Observation) -> JsonObject:
-    """The ``obs`` payload: one tick's observation, keys ``OBS_KEYS``."""
-    return {
-        "time_s": obs.time_s,
-        "x": obs.x,
-        "y": obs.y,
-        "flow_x": obs.flow_x,
-        "flow_y": obs.flow_y,
-        "detected": obs.detected,
-    }
-
-
-def observation_from_json(data: Mapping[str, Any]) -> Observation:
-    """Inverse of ``obs_json`` (exact: JSON floats round-trip); ValueError on missing keys."""
-    missing = [k for k in OBS_KEYS if k not in data]
-    if missing:
-        raise ValueError(f"observation lacks {', '.join(missing)}")
-    return Observation(
-        time_s=float(data["time_s"]),
-        x=float(data["x"]),
-        y=float(data["y"]),
-        flow_x=float(data["flow_x"]),
-        flow_y=float(data["flow_y"]),
-        detected=data["detected"],
-    )
-
-
-def estimate_json(time_s: float, state: str, estimate: Estimate) -> JsonObject:
-    """The ``estimate`` payload, keys ``ESTIMATE_KEYS``; ``cell`` is the papers' 1-based number."""
-    if state not in ESTIMATE_STATES:
-        raise ValueError(f"estimate state {state!r} is not one of {sorted(ESTIMATE_STATES)}")
-    return {
-        "time_s": _finite("time_s", time_s),
-        "state": str(state),
-        "cell": int(estimate.cell),
-        "x": float(estimate.x),
-        "y": float(estimate.y),
-        "probability": float(estimate.probability),
-        "entropy": float(estimate.entropy),
-    }
-
-
-def path_json(time_s: float, waypoints: Sequence[Waypoint]) -> JsonObject:
-    """The ``path`` payload: the planned waypoints ``[[x, y], ...]`` in the map frame."""
-    points = [[_finite("waypoint x", x), _finite("waypoint y", y)] for x, y in waypoints]
-    return {"time_s": _finite("time_s", time_s), "waypoints": points}
-
-
-def json_payload(value: JsonObject) -> bytes:
-    """Compact UTF-8 JSON; NaN and infinity are refused (they are not JSON)."""
-    return json.dumps(value, separators=(",", ":"), allow_nan=False).encode()
 
 
 def session_config(config: ZenohConfig, extra: Mapping[str, Any] | None = None) -> zenoh.Config:

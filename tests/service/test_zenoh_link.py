@@ -17,8 +17,9 @@ from service.errors import ConfigError, LinkError
 from service.grid import Grid
 from service.grid_message import decode_grid
 from service.mapping.mapper import Estimate
+from service.messages import ESTIMATE_KEYS, OBS_KEYS, PATH_KEYS
 from service.observation import Observation
-from service.zenoh_link import ESTIMATE_KEYS, OBS_KEYS, PATH_KEYS, ZenohLink, session_config
+from service.zenoh_link import ZenohLink, session_config
 
 GRID = Grid(x_min=0.0, x_max=60.0, y_min=-20.0, y_max=15.0, columns=12, rows=7)  # n != m
 VEHICLE = "rover-7"
