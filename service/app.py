@@ -51,6 +51,9 @@ from service.zenoh_link import ZenohLink
 
 log = logging.getLogger("oslim")
 
+SILENT_TICKS = 5
+"""Ticks without a position, flow or chemical reading before the service warns about it."""
+
 STREAMS = {"LOCAL_POSITION_NED": 32, "WIND": 168, "WIND_COV": 231}
 """Messages the service asks the autopilot for (MAVLink message ids)."""
 
@@ -151,6 +154,7 @@ class Service:
         self.tick_wall: deque[tuple[float, float]] = deque(maxlen=4096)
         """(tick time_s rounded to ms, wall-clock time.time() when the tick started): for latency probes."""
         self._position: Position | None = None
+        self._silent: dict[str, int] = {}
         self._heading_rad = 0.0
         self._gate_state = GateState(False, "starting")
         self._link_was_alive = False
@@ -297,6 +301,7 @@ class Service:
         self.stats.ticks += 1
         for gap in tick.gaps:
             self.stats.gaps[gap] = self.stats.gaps.get(gap, 0) + 1
+        self._report_silent_streams(tick)
         obs = tick.observation
         if obs is None:
             log.debug("tick %.1f: no observation (missing %s)", tick.time_s, ", ".join(tick.gaps))
@@ -329,6 +334,16 @@ class Service:
         self._update_gate(now)
         if self._command(now):
             self.stats.latency_ms.append((time.perf_counter() - started) * 1e3)
+
+    def _report_silent_streams(self, tick: Tick) -> None:
+        """One warning when a stream has been silent for SILENT_TICKS ticks, one line when it is back."""
+        for stream in ("position", "flow", "chemical"):
+            if stream in tick.gaps:
+                self._silent[stream] = self._silent.get(stream, 0) + 1
+                if self._silent[stream] == SILENT_TICKS:
+                    log.warning("no %s readings for %d ticks: the map is not updated", stream, SILENT_TICKS)
+            elif self._silent.pop(stream, 0) >= SILENT_TICKS:
+                log.info("%s readings are back", stream)
 
     def _publish(self, obs: Any, out: MissionOutput) -> None:
         slim, plume = self.mapper.likelihood, self.mapper.plume

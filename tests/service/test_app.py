@@ -12,9 +12,12 @@ import pytest
 import zenoh
 from mcap.reader import make_reader
 
+from service.app import SILENT_TICKS, Service
+from service.config import Config
 from service.grid_message import decode_grid
 from service.replay import replay
 from service.sim import ClosedLoop, closed_loop
+from service.tick import Tick
 from sim_bridge.scenarios import load_scenario
 from sim_bridge.stub import Stream
 
@@ -148,3 +151,16 @@ def test_zenoh_maps_queryable_and_mcap_replay(tmp_path: Path) -> None:
     report = replay(mcap_path)
     assert report.ok, report.summary()
     assert report.grids_compared >= 6
+
+
+def test_silent_streams_are_reported_once(caplog: pytest.LogCaptureFixture) -> None:
+    service = Service(Config())
+    with caplog.at_level("INFO", logger="oslim"):
+        for k in range(SILENT_TICKS + 3):
+            service._report_silent_streams(Tick(float(k), None, ("flow", "chemical"), 0))
+        service._report_silent_streams(Tick(99.0, None, ("chemical",), 0))
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines.count(f"no flow readings for {SILENT_TICKS} ticks: the map is not updated") == 1
+    assert lines.count(f"no chemical readings for {SILENT_TICKS} ticks: the map is not updated") == 1
+    assert lines.count("flow readings are back") == 1
+    assert not any("chemical readings are back" in line for line in lines)
