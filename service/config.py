@@ -152,9 +152,21 @@ class DeclarationConfig(_Section):
         default_factory=lambda: [DeclarationRule.MASS], min_length=1
     )
     stable_s: float = Field(default=30.0, gt=0)
-    probability: float = Field(default=0.8, gt=0, le=1)
+    probability: float = Field(default=0.95, gt=0, le=1)
+    hmm_probability: float = Field(default=0.25, gt=0, le=1)
+    """The mass rule's threshold with the hmm mapper: its pi is adapted by the gains of seed
+    hmm-plume-mapping §IV-B1, not a posterior, and stays far flatter than the Bayesian ones."""
     radius_m: float = Field(default=3.0, ge=0)
     visit_radius_m: float = Field(default=3.0, gt=0)
+    confirm_s: float = Field(default=0.0, ge=0)
+    """A rule must keep firing for the same cell, the vehicle near it, this long, s (0: at once)."""
+
+    def for_mapper(self, mapper: str) -> DeclarationConfig:
+        """This configuration as it applies to the mapper named ``mapper``: ``hmm_probability``
+        for the hmm, unchanged for any other (including mappers outside ``MappingMethod``)."""
+        if mapper == MappingMethod.HMM.value:
+            return self.model_copy(update={"probability": self.hmm_probability})
+        return self
 
 
 class ZenohConfig(_Section):

@@ -135,7 +135,7 @@ class Mission:
         self.planner = planner if planner is not None else make_planner(grid, self.planning)
         self._router = AStarPlanner(grid, self.planning)  # zigzag, cast and fallback legs
         self._reach = Reachability(grid)
-        self._declarer = Declarer(grid, declaration or DeclarationConfig())
+        self._declarer = Declarer(grid, (declaration or DeclarationConfig()).for_mapper(mapper.name))
         self._state = MissionState.FIND
         self._last_time: float | None = None
         self._last_detection: tuple[float, float, float] | None = None  # (t, x, y)
@@ -146,6 +146,7 @@ class Mission:
         self._sweep_upflow = True
         self._emitted: tuple[Waypoint, ...] | None = None
         self._hold: Waypoint | None = None
+        self._probe: int | None = None  # a probe beyond an obstacle, flown until reached
 
     @classmethod
     def from_config(cls, config: Config, grid: Grid, mapper: SourceMapper) -> Mission:
@@ -248,6 +249,7 @@ class Mission:
     def _enter(self, state: MissionState) -> None:
         self._state = state
         self._pattern, self._pattern_index = (), 0
+        self._probe = None
         if state is MissionState.LOST and self._last_detection is not None and self._frame is not None:
             _, x, y = self._last_detection
             p = self.planning
@@ -275,11 +277,19 @@ class Mission:
         self._pattern_index = 0
 
     def _trace(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
-        if ctx.goal == ctx.cell:
-            # at the estimate and not yet declared: staying put only repeats one observation
-            # (odour there is explained as well by any source upflow), so probe the cell upflow:
-            # odour there rules the vehicle's cell out, none there rules the cells upflow out
+        if self._probe is not None and self._probe != ctx.cell:
+            # a probe beyond an obstacle is a detour: replanning toward the estimate each tick
+            # would turn back at the first step off it, so the probe is flown until reached
+            return self._route(self._router, replace(ctx, goal=self._probe))
+        self._probe = None
+        if self._reach.goal_for(ctx.cell, ctx.goal) == ctx.cell:
+            # at the estimate (or as near as it can be reached, beside an obstacle) and not yet
+            # declared: staying put only repeats one observation (odour there is explained as well
+            # by any source upflow), so probe the cell upflow: odour there rules the vehicle's cell
+            # out, none there rules the cells upflow out
             probe = self._upflow_neighbour(ctx.cell)
+            if probe is None:
+                probe = self._probe = self._upflow_beyond(ctx.cell)
             if probe is not None:
                 return self._route(self._router, replace(ctx, goal=probe))
         return self._route(self.planner, ctx)
@@ -306,6 +316,28 @@ class Mission:
                 best, best_cos = neighbour, cos
         return best
 
+    def _upflow_beyond(self, cell: int) -> int | None:
+        """The first free cell reachable from ``cell`` on the line upflow of its centre, if any.
+
+        Used when every upflow neighbour is blocked (the vehicle stands against the downflow face
+        of an obstacle): the plume may cross the obstacle, and only a look beyond it tells a
+        source behind it from one in the vehicle's cell."""
+        if self._frame is None:
+            return None
+        grid = self.grid
+        reachable = self._reach.reachable(cell)
+        cx, cy = grid.centre(cell)
+        step_m = 0.5 * min(grid.cell_width_m, grid.cell_height_m)
+        distance_m = step_m
+        while True:
+            x, y = cx - distance_m * self._frame.ux, cy - distance_m * self._frame.uy
+            if not grid.contains(x, y):
+                return None
+            candidate = grid.cell_of(x, y)
+            if candidate != cell and reachable.flat[candidate]:
+                return candidate
+            distance_m += step_m
+
     def _lost(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
         wanted = self._follow_pattern(ctx)
         return wanted if wanted is not None else self._trace(ctx)
@@ -321,9 +353,15 @@ class Mission:
         turning point that cannot be reached counts as reached at the nearest reachable cell."""
         while self._pattern_index < len(self._pattern):
             vertex = self._pattern[self._pattern_index]
-            target = self._reach.goal_for(ctx.cell, self.grid.cell_of(vertex.x, vertex.y))
+            vertex_cell = self.grid.cell_of(vertex.x, vertex.y)
+            target = self._reach.goal_for(ctx.cell, vertex_cell)
             if target != ctx.cell:
-                if segment_clear(self.grid, (ctx.vehicle.x, ctx.vehicle.y), (vertex.x, vertex.y)):
+                # a vertex in a blocked cell (an obstacle rectangle may cover only part of a
+                # cell) would be refused by the safety rule: the route goes to its stand-in
+                straight = target == vertex_cell
+                if straight and segment_clear(
+                    self.grid, (ctx.vehicle.x, ctx.vehicle.y), (vertex.x, vertex.y)
+                ):
                     # a clear leg is flown straight: A*'s cell staircase would put the diagonal
                     # part of a sweep leg anywhere along it, and a leg that first runs along the
                     # previous one sweeps nothing new

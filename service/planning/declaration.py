@@ -19,6 +19,13 @@ argmax can sit still, or gather mass, anywhere along that line. Only observation
 estimate itself (odour just downflow of a true source, none just upflow of it) tell the cells
 of that line apart, so the vehicle has to have reached the estimate before it is named.
 
+With ``confirm_s`` > 0 a rule must keep firing, for the same estimated cell and with the
+vehicle staying near it, for that long before the source is declared. In a flow that varies in
+space (seed hmm-plume-mapping's meandering plume) the mappers' flow record, taken at the vehicle,
+does not say where the plume went: when it swings off the vehicle's line, the odour stops as it
+would upflow of a source, and the map names the place where it stopped. Waiting about one
+correlation time of the meander lets the plume swing back (odour upflow moves the estimate on).
+
 The estimate is the cell of greatest likelihood (the mapper's ``estimate``); ties go to the
 lowest flat index, as ``numpy.argmax`` does.
 """
@@ -75,6 +82,7 @@ class Declarer:
         self.config = config
         self._cell: int | None = None
         self._since_s = 0.0
+        self._firing_since_s: float | None = None  # since when a rule fires for self._cell
 
     @property
     def armed(self) -> bool:
@@ -84,6 +92,7 @@ class Declarer:
         """Start judging at ``time_s`` (the first detection): the stable clock starts now."""
         self._cell = int(np.argmax(likelihood))
         self._since_s = time_s
+        self._firing_since_s = None
 
     def update(
         self, time_s: float, likelihood: FloatArray, vehicle_m: tuple[float, float] | None = None
@@ -96,9 +105,11 @@ class Declarer:
         cell = int(np.argmax(likelihood))
         if cell != self._cell:
             self._cell, self._since_s = cell, time_s
+            self._firing_since_s = None
         if vehicle_m is not None:
             cx, cy = self.grid.centre(cell)
             if math.hypot(vehicle_m[0] - cx, vehicle_m[1] - cy) > self.config.visit_radius_m:
+                self._firing_since_s = None
                 return None
         mass = mass_within(self.grid, likelihood, cell, self.config.radius_m)
         fired = {
@@ -108,6 +119,11 @@ class Declarer:
         }
         rules = tuple(dict.fromkeys(r for r in self.config.rules if fired[r]))
         if not rules:
+            self._firing_since_s = None
+            return None
+        if self._firing_since_s is None:
+            self._firing_since_s = time_s
+        if time_s - self._firing_since_s < self.config.confirm_s - 1e-9:
             return None
         x, y = self.grid.centre(cell)
         return Declaration(

@@ -215,10 +215,12 @@ def test_reaches_the_estimate_whenever_a_path_exists() -> None:
             reached += 1
         else:
             # no path: the mission went to the reachable cell nearest the estimate, without error
+            # (and from there probes upflow, so it need not end there)
             gx, gy = grid.centre(goal)
             dist = [math.dist(grid.centre(int(c)), (gx, gy)) for c in np.flatnonzero(reach)]
             assert reach.flat[here]
-            assert math.dist(grid.centre(here), (gx, gy)) == pytest.approx(min(dist))
+            nearest = min(math.dist(grid.centre(c), (gx, gy)) for c in visited)
+            assert nearest == pytest.approx(min(dist))
             fell_back += 1
     assert reached > 20
     assert fell_back > 5
@@ -371,7 +373,8 @@ def test_with_the_hmm_mapper_end_to_end() -> None:
     grid = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25, obstacles=((60.0, 10.0, 80.0, 17.5),))
     for method in sorted(PLANNERS):
         mapper = HmmMapper(grid)
-        mission = Mission(grid, mapper, PlanningConfig(method=PlanningMethod(method)))
+        # declaration off: a declared mission holds, and this test is about the moving states
+        mission = Mission(grid, mapper, PlanningConfig(method=PlanningMethod(method)), NEVER)
         vehicle = Vehicle(70.0, -40.0)
         for t in range(20):
             detected = 8 <= t <= 12
@@ -419,3 +422,45 @@ def test_the_sweep_turns_with_the_mean_flow() -> None:
         last = got if got is not None else last
     assert last is not None
     assert min(abs(last[-1].x - e) for e in x_edges) < 1e-9  # legs run East-West
+
+
+def test_probes_beyond_an_obstacle_that_blocks_every_upflow_neighbour() -> None:
+    # the estimate is the vehicle's own cell, against the downflow face of a wall: the mission
+    # flies round the wall to the first free cell upflow instead of holding at the face
+    grid = Grid(0.0, 100.0, -50.0, 50.0, columns=20, rows=20, obstacles=((40.0, -10.0, 50.0, 10.0),))
+    here = grid.cell_of(52.5, 2.5)
+    beyond = grid.cell_of(37.5, 2.5)
+    assert grid.obstacle_mask.flat[grid.cell_of(47.5, 2.5)]
+    mapper = ScriptedMapper(grid)
+    mapper.peak_at(here)
+    mission = Mission(grid, mapper, PlanningConfig(), NEVER)
+    vehicle = Vehicle(*grid.centre(here))
+    visited = set()
+    for t in range(30):
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, True), vehicle.state)
+        if out.waypoints is not None:
+            for w in out.waypoints:
+                assert_safe_waypoint(grid, w)
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        visited.add(grid.cell_of(vehicle.x, vehicle.y))
+    assert beyond in visited
+
+
+def test_a_cast_turning_point_in_a_blocked_cell_does_not_stall_the_cast() -> None:
+    # the wang scenarios' obstacle ends at x = 56.25, a cell centre: a turning point just past it
+    # lies in a blocked cell; the cast goes on to the stand-in cell instead of holding
+    grid = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25, obstacles=((36.25, 0.25, 56.25, 7.75),))
+    mapper = ScriptedMapper(grid)
+    mapper.peak_at(grid.cell_of(90.0, 40.0))
+    planning = PlanningConfig(lost_after_s=2.0, cast_width_m=10.0, cast_legs=4)
+    mission = Mission(grid, mapper, planning, NEVER)
+    vehicle = Vehicle(56.4, 10.5)
+    positions = []
+    for t in range(40):
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, t == 0), vehicle.state)
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        positions.append((round(vehicle.x, 3), round(vehicle.y, 3)))
+    assert mission.state in (MissionState.LOST, MissionState.TRACE)
+    assert len(set(positions[-10:])) > 1  # still moving

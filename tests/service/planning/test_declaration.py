@@ -92,3 +92,25 @@ def test_mass_rule_alone_ignores_a_stable_but_flat_map() -> None:
     d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=1.0))
     d.arm(0.0, peaked(12, 0.1))
     assert all(d.update(float(t), peaked(12, 0.1)) is None for t in range(1, 100))
+
+
+def test_confirm_waits_for_the_rule_to_keep_firing() -> None:
+    config = DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0, confirm_s=5.0)
+    d = Declarer(G, config)
+    d.arm(0.0, peaked(12, 0.6))
+    assert d.update(1.0, peaked(12, 0.6)) is None  # fires from t = 1 on
+    assert d.update(5.0, peaked(12, 0.6)) is None
+    assert d.update(5.5, peaked(12, 0.4)) is None  # stops firing: the wait starts again
+    assert d.update(6.0, peaked(12, 0.6)) is None
+    assert d.update(10.9, peaked(12, 0.6)) is None
+    found = d.update(11.0, peaked(12, 0.6))
+    assert found is not None
+    assert found.cell == 12
+
+
+def test_the_hmm_gets_its_own_mass_threshold() -> None:
+    config = DeclarationConfig(probability=0.95, hmm_probability=0.25)
+    assert config.for_mapper("hmm").probability == 0.25
+    assert config.for_mapper("pomdp").probability == 0.95
+    assert config.for_mapper("bayes") == config
+    assert config.for_mapper("scripted") == config  # a mapper outside the registry: unchanged
