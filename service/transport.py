@@ -74,9 +74,11 @@ def axis_kernel(drift: float, variance: float, substeps: int) -> AxisKernel:
     """
     c = drift / substeps
     v = max(variance / substeps, abs(c) * (1.0 - abs(c)))
-    higher = 0.5 * (v + c * c + c)
-    lower = 0.5 * (v + c * c - c)
-    return AxisKernel(lower=max(lower, 0.0), stay=1.0 - higher - max(lower, 0.0), higher=higher)
+    # a weight that is 0 in exact arithmetic (the upflow side with no spreading) can round to
+    # -1e-17; clamp it so every entry of A is a probability
+    higher = max(0.5 * (v + c * c + c), 0.0)
+    lower = max(0.5 * (v + c * c - c), 0.0)
+    return AxisKernel(lower=lower, stay=max(1.0 - higher - lower, 0.0), higher=higher)
 
 
 def push_axis(values: FloatArray, kernel: AxisKernel, axis: int) -> FloatArray:
