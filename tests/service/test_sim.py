@@ -17,7 +17,7 @@ pytestmark = pytest.mark.sim
 def test_declares_the_wang_laminar_source(tmp_path: Path) -> None:
     scenario = load_scenario("wang-laminar")
     result, stats, perf = asyncio.run(
-        run_mission(scenario, 1, speed=20.0, max_time_s=400.0, recorder_dir=str(tmp_path), probe=False)
+        run_mission(scenario, 1, speed=10.0, max_time_s=600.0, recorder_dir=str(tmp_path), probe=False)
     )
     assert result.found, result
     assert result.error_m is not None
