@@ -3,8 +3,7 @@
 The mapper runs at a lower rate than the sensors: it takes the mean flow over the tick's samples
 (eq. 1-2) and the peak chemical reading (so no detection event is missed), thresholded. A tick
 with no position, no flow or no chemical reading gives no observation: nothing is invented, and
-the gap is reported so it can be logged and recorded. A detection is placed where the vehicle
-was when it happened (the first reading at or over the threshold), not at the end of the tick.
+the gap is reported so it can be logged and recorded.
 """
 
 from __future__ import annotations
@@ -34,8 +33,6 @@ class TickAggregator:
     _chem_max: float | None = None
     _detected: bool | None = None
     _position: Position | None = None
-    _hit_position: Position | None = None
-    """Where the vehicle was at the tick's first detection (peak reading at or over threshold)."""
     _samples: int = 0
 
     def add(self, sample: Position | FlowSample | ChemSample | DetectionSample) -> None:
@@ -51,12 +48,8 @@ class TickAggregator:
         elif isinstance(sample, FlowSample):
             self._flows.append(sample)
         elif isinstance(sample, ChemSample):
-            if sample.value >= self.threshold and self._hit_position is None:
-                self._hit_position = self._position
             self._chem_max = sample.value if self._chem_max is None else max(self._chem_max, sample.value)
         else:
-            if sample.detected and self._hit_position is None:
-                self._hit_position = self._position
             self._detected = bool(self._detected) or sample.detected
 
     def close(self, time_s: float) -> Tick:
@@ -76,14 +69,11 @@ class TickAggregator:
             detected = bool(self._detected) or (
                 self._chem_max is not None and self._chem_max >= self.threshold
             )
-            # a detection belongs where it happened, not where the vehicle is at the tick's end
-            at = self._hit_position if detected and self._hit_position is not None else position
-            observation = Observation(time_s, at.x, at.y, flow_x, flow_y, detected)
+            observation = Observation(time_s, position.x, position.y, flow_x, flow_y, detected)
         tick = Tick(time_s, observation, tuple(gaps), self._samples)
         self._flows = []
         self._chem_max = None
         self._detected = None
-        self._hit_position = None
         self._samples = 0
         # the position persists (up to max_position_age_s): a slow position stream is not a gap
         return tick

