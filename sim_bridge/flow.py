@@ -47,36 +47,41 @@ def velocity_at(flow: FlowField, x_m: float, y_m: float) -> Vector:
     return float(u[0]), float(v[0])
 
 
-def _check_dt(dt_s: float) -> None:
-    if not (math.isfinite(dt_s) and dt_s > 0):
-        raise ValueError(f"dt_s must be positive and finite, got {dt_s}")
-
-
 def _constant(value: Vector, x_m: FloatArray) -> tuple[FloatArray, FloatArray]:
     shape = np.shape(x_m)
     return np.full(shape, value[0]), np.full(shape, value[1])
 
 
-class UniformFlow:
-    """The same velocity everywhere, always."""
+class _Clocked:
+    """The simulated clock every field keeps; ``_evolve`` is the field's own change over dt_s."""
 
-    def __init__(self, velocity_mps: Vector) -> None:
-        self._velocity = (float(velocity_mps[0]), float(velocity_mps[1]))
-        self._time_s = 0.0
+    _time_s: float = 0.0
 
     @property
     def time_s(self) -> float:
         return self._time_s
 
     def advance(self, dt_s: float) -> None:
-        _check_dt(dt_s)
+        if not (math.isfinite(dt_s) and dt_s > 0):
+            raise ValueError(f"dt_s must be positive and finite, got {dt_s}")
+        self._evolve(dt_s)
         self._time_s += dt_s
+
+    def _evolve(self, dt_s: float) -> None:
+        """Change the field over the next ``dt_s`` seconds (nothing, for a steady field)."""
+
+
+class UniformFlow(_Clocked):
+    """The same velocity everywhere, always."""
+
+    def __init__(self, velocity_mps: Vector) -> None:
+        self._velocity = (float(velocity_mps[0]), float(velocity_mps[1]))
 
     def velocity(self, x_m: FloatArray, y_m: FloatArray) -> tuple[FloatArray, FloatArray]:
         return _constant(self._velocity, x_m)
 
 
-class SwitchedFlow:
+class SwitchedFlow(_Clocked):
     """Seed hmm-plume-mapping eq. 18: ``before_mps`` for t <= ``switch_s``, ``after_mps`` after."""
 
     def __init__(
@@ -85,15 +90,6 @@ class SwitchedFlow:
         self._before = (float(before_mps[0]), float(before_mps[1]))
         self._after = (float(after_mps[0]), float(after_mps[1]))
         self._switch_s = float(switch_s)
-        self._time_s = 0.0
-
-    @property
-    def time_s(self) -> float:
-        return self._time_s
-
-    def advance(self, dt_s: float) -> None:
-        _check_dt(dt_s)
-        self._time_s += dt_s
 
     def velocity(self, x_m: FloatArray, y_m: FloatArray) -> tuple[FloatArray, FloatArray]:
         # eq. 18: (u_x, u_y) = (1, 0) for t <= 30 s, (0, 1) otherwise
@@ -101,7 +97,7 @@ class SwitchedFlow:
         return _constant(self._before if self._time_s <= self._switch_s + 1e-9 else self._after, x_m)
 
 
-class MeanderingFlow:
+class MeanderingFlow(_Clocked):
     """A mean flow plus a divergence-free random perturbation, smooth in space and time.
 
     The perturbation has RMS magnitude ``strength_mps``: half of its energy is a spatially uniform
@@ -141,14 +137,8 @@ class MeanderingFlow:
         self._mode_std = strength_mps / math.sqrt(modes)
         self._uniform = rng.normal(0.0, self._uniform_std, 2)
         self._amplitude = rng.normal(0.0, self._mode_std, modes)
-        self._time_s = 0.0
 
-    @property
-    def time_s(self) -> float:
-        return self._time_s
-
-    def advance(self, dt_s: float) -> None:
-        _check_dt(dt_s)
+    def _evolve(self, dt_s: float) -> None:
         rho = math.exp(-dt_s / self._tau_s)
         kick = math.sqrt(1.0 - rho * rho)
         # exact Ornstein-Uhlenbeck step: a <- rho a + s sqrt(1 - rho^2) xi
@@ -156,7 +146,6 @@ class MeanderingFlow:
         self._amplitude = rho * self._amplitude + kick * self._mode_std * self._rng.standard_normal(
             self._amplitude.size
         )
-        self._time_s += dt_s
 
     def velocity(self, x_m: FloatArray, y_m: FloatArray) -> tuple[FloatArray, FloatArray]:
         x = np.asarray(x_m, dtype=float)
@@ -171,7 +160,7 @@ class MeanderingFlow:
         return np.asarray(u, dtype=float), np.asarray(v, dtype=float)
 
 
-class TurbulentFlow:
+class TurbulentFlow(_Clocked):
     """Seed pomdp-astar turbulent case: a mean flow plus Gaussian white noise on the velocity.
 
     The noise is uniform in space and redrawn every ``noise_period_s`` (the flow-record period of
@@ -194,18 +183,11 @@ class TurbulentFlow:
         self._rng = rng
         self._noise = self._draw()
         self._since_draw_s = 0.0
-        self._time_s = 0.0
 
     def _draw(self) -> FloatArray:
         return self._rng.normal(0.0, self._std, 2)
 
-    @property
-    def time_s(self) -> float:
-        return self._time_s
-
-    def advance(self, dt_s: float) -> None:
-        _check_dt(dt_s)
-        self._time_s += dt_s
+    def _evolve(self, dt_s: float) -> None:
         # a bounded accumulator, not the absolute clock: its rounding does not grow with time
         self._since_draw_s += dt_s
         while self._since_draw_s >= self._period_s - 1e-9:
