@@ -67,8 +67,4 @@ def test_impossible_event_leaves_the_map_alone(mapper_class: type[SourceMapper])
 
 def test_every_registered_mapper_is_covered() -> None:
     # a new mapper joins the parametrisations above (hmm's invariants are in test_hmm.py)
-    assert set(MAPPERS) == {
-        "hmm",
-        "bayes",
-        "pomdp",
-    }  # hmm's own invariants: tests/service/mapping/test_hmm.py
+    assert set(MAPPERS) == {"hmm", "bayes", "pomdp"}
