@@ -107,6 +107,7 @@ class MappingConfig(_Section):
     window: int = Field(default=50, gt=0, le=10_000)
     sigma_x: float = Field(default=0.2, gt=0)
     sigma_y: float = Field(default=0.2, gt=0)
+    drift_spread: float = Field(default=0.0, ge=0)
     zero_lag: bool = True
     epsilon_d: float = Field(default=0.2, gt=0, lt=1)
     epsilon_c: float = Field(default=0.02, gt=0, lt=1)
@@ -160,12 +161,18 @@ class DeclarationConfig(_Section):
     visit_radius_m: float = Field(default=3.0, gt=0)
     confirm_s: float = Field(default=0.0, ge=0)
     """A rule must keep firing for the same cell, the vehicle near it, this long, s (0: at once)."""
+    upflow_pass_m: float = Field(default=0.0, ge=0)
+    """No rule fires for a cell until the vehicle has been at least this far upflow of its centre
+    (along the mean flow, within ``visit_radius_m`` across it) since it became the estimate, m
+    (0: off). Bayesian mappers only: the hmm's estimate mostly sits in the vehicle's own cell and
+    moves with it, so it is seldom passed (farrell2003, hmm + astar, 100 runs: 45 % -> 32 %)."""
 
     def for_mapper(self, mapper: str) -> DeclarationConfig:
         """This configuration as it applies to the mapper named ``mapper``: ``hmm_probability``
-        for the hmm, unchanged for any other (including mappers outside ``MappingMethod``)."""
+        and no upflow pass for the hmm, unchanged for any other (including mappers outside
+        ``MappingMethod``)."""
         if mapper == MappingMethod.HMM.value:
-            return self.model_copy(update={"probability": self.hmm_probability})
+            return self.model_copy(update={"probability": self.hmm_probability, "upflow_pass_m": 0.0})
         return self
 
 

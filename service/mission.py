@@ -230,7 +230,8 @@ class Mission:
                 events.append(PlumeLost(t, x_last, y_last, t_last))
                 self._enter(MissionState.LOST)
         if self._declarer.armed:
-            found = self._declarer.update(t, self.mapper.likelihood, (obs.x, obs.y))
+            flow = None if self._frame is None else (self._frame.ux, self._frame.uy)
+            found = self._declarer.update(t, self.mapper.likelihood, (obs.x, obs.y), flow)
             if found is not None:
                 events.append(
                     SourceDeclared(

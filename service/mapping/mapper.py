@@ -35,6 +35,10 @@ class MapperParams:
     sigma_x: float = 1.0
     """Random-walk spreading of a filament along x, m / sqrt(s) (seed reactive-planning eq. 1)."""
     sigma_y: float = 1.0
+    drift_spread: float = 0.0
+    """Gain k of the drift uncertainty (filament eq. D1), dimensionless: a filament of lag tau gets an
+    extra per-axis spread k s tau, s the std (m/s) of that flow component over the window
+    (Bayesian and POMDP mappers; 0: the papers' model)."""
     mu: float = 0.9
     """P(detect | detectable odour in the cell): the papers' mu."""
     false_alarm: float = 0.001
@@ -59,6 +63,8 @@ class MapperParams:
             raise ValueError(f"window must be >= 1, got {self.window}")
         if not (0 < self.mu <= 1 and 0 <= self.false_alarm < 1):
             raise ValueError(f"need 0 < mu <= 1 and 0 <= false_alarm < 1, got {self.mu}, {self.false_alarm}")
+        if not self.drift_spread >= 0.0:
+            raise ValueError(f"drift_spread must be >= 0, got {self.drift_spread}")
         if not 0 <= self.miss_floor < 1:
             raise ValueError(f"miss_floor must be in [0, 1), got {self.miss_floor}")
         if not (0 < self.epsilon_d < 1 and 0 < self.epsilon_c < 1):
@@ -71,6 +77,7 @@ class MapperParams:
             window=m.window,
             sigma_x=m.sigma_x,
             sigma_y=m.sigma_y,
+            drift_spread=m.drift_spread,
             mu=s.detection_probability,
             false_alarm=s.false_alarm_probability,
             miss_floor=s.miss_floor,

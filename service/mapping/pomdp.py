@@ -102,7 +102,15 @@ class PomdpMapper(SourceMapper):
     def log_gamma(self, cell: int) -> FloatArray:
         """log gamma_ij (eq. 2) for a vehicle in flat cell ``cell``, over the window, shape (n, m)."""
         p = self.params
-        px, py = history_factors(self.grid, cell, self.history, p.sigma_x, p.sigma_y, zero_lag=p.zero_lag)
+        px, py = history_factors(
+            self.grid,
+            cell,
+            self.history,
+            p.sigma_x,
+            p.sigma_y,
+            zero_lag=p.zero_lag,
+            drift_spread=p.drift_spread,
+        )
         return log_non_detection(px, py, p.mu)
 
     def detection_likelihood(self, cell: int) -> FloatArray:

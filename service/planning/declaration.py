@@ -26,6 +26,16 @@ does not say where the plume went: when it swings off the vehicle's line, the od
 would upflow of a source, and the map names the place where it stopped. Waiting about one
 correlation time of the meander lets the plume swing back (odour upflow moves the estimate on).
 
+With ``upflow_pass_m`` > 0 a rule also waits until the vehicle has been at least that far upflow
+of the estimated cell's centre (along the mean flow, and within ``visit_radius_m`` of the line
+through the centre across it) since that cell became the estimate. Odour at the estimate is
+explained as well by a source there as by any source upflow; in a flow that varies in space the
+mappers' drift lines from successive detections meet near the vehicle, so a map can gather its
+mass where the vehicle is while it is still in the plume, far downflow of the source. Only a look
+upflow tells them apart: odour there moves the estimate on (and restarts the wait), none there
+leaves it. The mission's trace behaviour probes the upflow neighbour whenever the vehicle is at
+the estimate, so the pass comes without a change of planner.
+
 The estimate is the cell of greatest likelihood (the mapper's ``estimate``); ties go to the
 lowest flat index, as ``numpy.argmax`` does.
 """
@@ -83,6 +93,7 @@ class Declarer:
         self._cell: int | None = None
         self._since_s = 0.0
         self._firing_since_s: float | None = None  # since when a rule fires for self._cell
+        self._passed_upflow = False  # the vehicle has been upflow_pass_m upflow of self._cell
 
     @property
     def armed(self) -> bool:
@@ -93,19 +104,32 @@ class Declarer:
         self._cell = int(np.argmax(likelihood))
         self._since_s = time_s
         self._firing_since_s = None
+        self._passed_upflow = False
 
     def update(
-        self, time_s: float, likelihood: FloatArray, vehicle_m: tuple[float, float] | None = None
+        self,
+        time_s: float,
+        likelihood: FloatArray,
+        vehicle_m: tuple[float, float] | None = None,
+        flow: tuple[float, float] | None = None,
     ) -> Declaration | None:
         """The declaration if an enabled rule fires at this tick, else None (always None unarmed).
         With ``vehicle_m`` (x, y), nothing fires while the vehicle is farther than
-        ``visit_radius_m`` from the estimated cell's centre."""
+        ``visit_radius_m`` from the estimated cell's centre. With ``upflow_pass_m`` > 0, nothing
+        fires until the vehicle (``vehicle_m``) has been that far upflow of the centre against
+        ``flow`` (the mean flow direction, any length); without both, never."""
         if self._cell is None:
             return None
         cell = int(np.argmax(likelihood))
         if cell != self._cell:
             self._cell, self._since_s = cell, time_s
             self._firing_since_s = None
+            self._passed_upflow = False
+        if self.config.upflow_pass_m > 0.0:
+            self._passed_upflow = self._passed_upflow or self._is_upflow(cell, vehicle_m, flow)
+            if not self._passed_upflow:
+                self._firing_since_s = None
+                return None
         if vehicle_m is not None:
             cx, cy = self.grid.centre(cell)
             if math.hypot(vehicle_m[0] - cx, vehicle_m[1] - cy) > self.config.visit_radius_m:
@@ -136,3 +160,20 @@ class Declarer:
             mass=mass,
             rules=rules,
         )
+
+    def _is_upflow(
+        self, cell: int, vehicle_m: tuple[float, float] | None, flow: tuple[float, float] | None
+    ) -> bool:
+        """Whether the vehicle is ``upflow_pass_m`` or more upflow of ``cell``'s centre and within
+        ``visit_radius_m`` of the flow line through it."""
+        if vehicle_m is None or flow is None:
+            return False
+        speed = math.hypot(*flow)
+        if speed == 0.0:
+            return False
+        ux, uy = flow[0] / speed, flow[1] / speed
+        cx, cy = self.grid.centre(cell)
+        dx, dy = vehicle_m[0] - cx, vehicle_m[1] - cy
+        upflow_m = -(dx * ux + dy * uy)
+        across_m = abs(dx * uy - dy * ux)
+        return upflow_m >= self.config.upflow_pass_m - 1e-9 and across_m <= self.config.visit_radius_m

@@ -6,7 +6,7 @@ import pytest
 from scipy.stats import norm
 
 from service.grid import Grid
-from service.mapping.filament import filament_factors, history_factors, release_offsets
+from service.mapping.filament import filament_factors, flow_spread, history_factors, release_offsets
 from service.mapping.mapper import FlowStep
 from service.transport import transition
 
@@ -126,3 +126,33 @@ def test_empty_history_has_no_release_times() -> None:
     px, py = history_factors(SMALL, 0, [], 1.0, 1.0)
     assert px.shape == (0, 5)
     assert py.shape == (0, 4)
+
+
+def test_flow_spread_is_the_time_weighted_std_of_each_component() -> None:
+    def step(ux: float, uy: float, dt: float) -> FlowStep:
+        return FlowStep(transition(SMALL, ux, uy, dt), ux * dt, uy * dt, dt)
+
+    # u_x: 1 for 1 s, 2 for 3 s -> mean 1.75, variance (0.75^2 * 1 + 0.25^2 * 3) / 4 = 0.1875
+    history = [step(1.0, 0.0, 1.0), step(2.0, 0.0, 3.0)]
+    sx, sy = flow_spread(history)
+    assert sx == pytest.approx(math.sqrt(0.1875))
+    assert sy == 0.0
+    assert flow_spread(history[:1]) == (0.0, 0.0)
+
+
+def test_drift_spread_widens_by_eq_d1() -> None:
+    def step(ux: float, uy: float) -> FlowStep:
+        return FlowStep(transition(SMALL, ux, uy, 1.0), ux, uy, 1.0)
+
+    history = [step(1.0, 0.5), step(1.0, -0.5), step(1.0, 0.5)]  # std of u_y: sqrt(2/9) m/s
+    k, sigma = 2.0, 0.5
+    px, py = history_factors(SMALL, SMALL.cell_of(7.0, 3.0), history, sigma, sigma, drift_spread=k)
+    px0, _ = history_factors(SMALL, SMALL.cell_of(7.0, 3.0), history, sigma, sigma)
+    np.testing.assert_array_equal(px, px0)  # u_x never varied: no extra spread along x
+    s_y = math.sqrt(2.0 / 9.0)
+    y_edges = np.arange(5) * 2.0
+    for lag, drift_y in [(1.0, 0.5), (2.0, 0.0), (3.0, 0.5)]:
+        spread = math.sqrt(sigma**2 * lag + (k * s_y * lag) ** 2)  # eq. D1
+        np.testing.assert_allclose(
+            py[int(lag) - 1], reference_factor(y_edges, 3.0, drift_y, spread), atol=1e-14
+        )

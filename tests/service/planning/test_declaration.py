@@ -114,3 +114,33 @@ def test_the_hmm_gets_its_own_mass_threshold() -> None:
     assert config.for_mapper("pomdp").probability == 0.95
     assert config.for_mapper("bayes") == config
     assert config.for_mapper("scripted") == config  # a mapper outside the registry: unchanged
+
+
+def test_upflow_pass_waits_until_the_vehicle_has_been_upflow_of_the_estimate() -> None:
+    config = DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0, upflow_pass_m=1.0)
+    d = Declarer(G, config)
+    pi = peaked(12, 0.6)  # centre (2.5, 2.5); flow toward +x, so upflow is -x
+    d.arm(0.0, pi)
+    east = (1.0, 0.0)
+    assert d.update(1.0, pi, (3.0, 2.5), east) is None  # downflow of the centre
+    assert d.update(2.0, pi, (2.0, 2.5), east) is None  # 0.5 m upflow: not far enough
+    assert d.update(3.0, pi, (1.5, 2.5)) is None  # no flow given: cannot tell upflow
+    found = d.update(4.0, pi, (1.5, 2.5), (2.0, 0.0))  # 1 m upflow (the flow's length does not matter)
+    assert found is not None
+    assert found.cell == 12
+    # a pass, once made, holds for that cell; a new estimate needs its own
+    assert d.update(5.0, pi, (2.5, 2.5), east) is not None
+    other = peaked(13, 0.6)  # centre (3.5, 2.5)
+    assert d.update(6.0, other, (2.5, 2.5), east) is not None  # (2.5, 2.5) is 1 m upflow of it
+    d.arm(7.0, other)
+    assert d.update(8.0, other, (3.0, 2.5), east) is None
+    # far upflow but more than visit_radius_m across the flow line does not count
+    assert d.update(9.0, other, (1.5, 6.0), (1.0, 0.0)) is None
+    assert d.update(10.0, other, (3.5, 2.5), east) is None
+
+
+def test_upflow_pass_is_off_by_default_and_for_the_hmm() -> None:
+    assert DeclarationConfig().upflow_pass_m == 0.0
+    config = DeclarationConfig(upflow_pass_m=2.0)
+    assert config.for_mapper("hmm").upflow_pass_m == 0.0
+    assert config.for_mapper("pomdp").upflow_pass_m == 2.0
