@@ -23,12 +23,12 @@ from typing import ClassVar
 
 import numpy as np
 
-from service.mapping.belief import FloatArray, bayes_update
+from service.mapping.belief import FloatArray
 from service.mapping.filament import history_factors
-from service.mapping.mapper import SourceMapper
+from service.mapping.mapper import ObservationModelMapper
 
 
-class BayesMapper(SourceMapper):
+class BayesMapper(ObservationModelMapper):
     name: ClassVar[str] = "bayes"
 
     def event_likelihood(self, cell: int) -> FloatArray:
@@ -47,9 +47,6 @@ class BayesMapper(SourceMapper):
         out: FloatArray = py.T @ px
         return out
 
-    def detection_likelihood(self, cell: int) -> FloatArray:
-        return self._event_probability(cell, detected=True)
-
     def _event_probability(self, cell: int, detected: bool) -> FloatArray:
         """P(d | i) = pf + (1 - pf) mu q_i, or P(no d | i) = (1 - pf)(1 - mu q_i), shape (n, m)."""
         p = self.params
@@ -59,11 +56,3 @@ class BayesMapper(SourceMapper):
             p.false_alarm + (1.0 - p.false_alarm) * seen if detected else (1.0 - p.false_alarm) * (1.0 - seen)
         )
         return out
-
-    def _assimilate(self, cell: int, detected: bool) -> None:
-        likelihood = self._event_probability(cell, detected)
-        if not float(np.vdot(self._pi, likelihood)) > 0.0:
-            # only possible with pf = 0: no cell explains the event; keep pi rather than reset it
-            self._ignore("impossible_event")
-            return
-        self._pi = bayes_update(self._pi, likelihood)

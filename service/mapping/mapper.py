@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from service.mapping.belief import FloatArray, entropy_nats
+from service.mapping.belief import FloatArray, bayes_update, entropy_nats
 from service.mapping.plume import advance_plume
 from service.transport import AxisKernel, Transition, transition
 
@@ -232,3 +232,24 @@ class SourceMapper(ABC):
         """P(detection in flat cell ``cell`` now | source in each cell), shape (n, m), per this
         mapper's own model and the current flow history. Planners (infotaxis) use it to predict
         the outcome of visiting ``cell``."""
+
+
+class ObservationModelMapper(SourceMapper):
+    """A mapper that fuses each event by Bayes' rule through its own observation model
+    P(event | source in each cell): the Bayesian and POMDP mappers differ only in that model."""
+
+    @abstractmethod
+    def _event_probability(self, cell: int, detected: bool) -> FloatArray:
+        """P(this detection / non-detection in flat cell ``cell`` | source in each cell), (n, m)."""
+
+    def detection_likelihood(self, cell: int) -> FloatArray:
+        return self._event_probability(cell, detected=True)
+
+    def _assimilate(self, cell: int, detected: bool) -> None:
+        likelihood = self._event_probability(cell, detected)
+        if not float(np.vdot(self._pi, likelihood)) > 0.0:
+            # only possible with pf = 0: no cell explains the event; keep pi rather than reset it
+            self._ignore("impossible_event")
+            return
+        # posterior proportional to P(event | source) prior (reactive-planning §II-B, pomdp-astar eq. 6)
+        self._pi = bayes_update(self._pi, likelihood)

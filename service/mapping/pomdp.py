@@ -22,9 +22,9 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from service.mapping.belief import FloatArray, bayes_update
+from service.mapping.belief import FloatArray
 from service.mapping.filament import history_factors
-from service.mapping.mapper import SourceMapper
+from service.mapping.mapper import ObservationModelMapper
 
 SERIES_TOLERANCE = 1e-12
 """Bound on the truncation error of log gamma per release time (so about window x this in all)."""
@@ -96,7 +96,7 @@ def log_non_detection(px: FloatArray, py: FloatArray, mu: float) -> FloatArray:
     return out
 
 
-class PomdpMapper(SourceMapper):
+class PomdpMapper(ObservationModelMapper):
     name: ClassVar[str] = "pomdp"
 
     def log_gamma(self, cell: int) -> FloatArray:
@@ -113,9 +113,6 @@ class PomdpMapper(SourceMapper):
         )
         return log_non_detection(px, py, p.mu)
 
-    def detection_likelihood(self, cell: int) -> FloatArray:
-        return self._event_probability(cell, detected=True)
-
     def _event_probability(self, cell: int, detected: bool) -> FloatArray:
         """O(d) = 1 - (1 - pf) gamma' or O(no d) = (1 - pf) gamma' (eq. 3 with false alarms), where
         gamma' = r + (1 - r) gamma with r the miss floor (gamma' = gamma, the paper's, for r = 0)."""
@@ -126,12 +123,3 @@ class PomdpMapper(SourceMapper):
         log_miss = np.log1p(-p.false_alarm) + log_gamma
         out: FloatArray = -np.expm1(log_miss) if detected else np.exp(log_miss)
         return out
-
-    def _assimilate(self, cell: int, detected: bool) -> None:
-        likelihood = self._event_probability(cell, detected)
-        if not float(np.vdot(self._pi, likelihood)) > 0.0:
-            # only possible with pf = 0: no cell explains the event; keep pi rather than reset it
-            self._ignore("impossible_event")
-            return
-        # eq. 6: b(c_i) proportional to O(c_j, o_k) b(c_i)
-        self._pi = bayes_update(self._pi, likelihood)
