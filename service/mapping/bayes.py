@@ -24,7 +24,6 @@ from typing import ClassVar
 import numpy as np
 
 from service.mapping.belief import FloatArray
-from service.mapping.filament import history_factors
 from service.mapping.mapper import ObservationModelMapper
 
 
@@ -33,16 +32,7 @@ class BayesMapper(ObservationModelMapper):
 
     def event_likelihood(self, cell: int) -> FloatArray:
         """L_i of eq. 5 for a vehicle in flat cell ``cell``: expected filaments there, shape (n, m)."""
-        p = self.params
-        px, py = history_factors(
-            self.grid,
-            cell,
-            self.history,
-            p.sigma_x,
-            p.sigma_y,
-            zero_lag=p.zero_lag,
-            drift_spread=p.drift_spread,
-        )
+        px, py = self._filament_factors(cell)
         # eq. 5: pi_i = sum_l P_i(t_l), with P_i(t_l) = py_l(row) px_l(col)
         out: FloatArray = py.T @ px
         return out

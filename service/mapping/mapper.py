@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from service.mapping.belief import FloatArray, bayes_update, entropy_nats
+from service.mapping.filament import history_factors
 from service.mapping.plume import advance_plume
 from service.transport import AxisKernel, Transition, transition
 
@@ -237,6 +238,19 @@ class SourceMapper(ABC):
 class ObservationModelMapper(SourceMapper):
     """A mapper that fuses each event by Bayes' rule through its own observation model
     P(event | source in each cell): the Bayesian and POMDP mappers differ only in that model."""
+
+    def _filament_factors(self, cell: int) -> tuple[FloatArray, FloatArray]:
+        """Px (W, m) and Py (W, n): one filament per release time of the window, seen from ``cell``."""
+        p = self.params
+        return history_factors(
+            self.grid,
+            cell,
+            self.history,
+            p.sigma_x,
+            p.sigma_y,
+            zero_lag=p.zero_lag,
+            drift_spread=p.drift_spread,
+        )
 
     @abstractmethod
     def _event_probability(self, cell: int, detected: bool) -> FloatArray:

@@ -23,7 +23,6 @@ import numpy as np
 import numpy.typing as npt
 
 from service.mapping.belief import FloatArray
-from service.mapping.filament import history_factors
 from service.mapping.mapper import ObservationModelMapper
 
 SERIES_TOLERANCE = 1e-12
@@ -102,15 +101,7 @@ class PomdpMapper(ObservationModelMapper):
     def log_gamma(self, cell: int) -> FloatArray:
         """log gamma_ij (eq. 2) for a vehicle in flat cell ``cell``, over the window, shape (n, m)."""
         p = self.params
-        px, py = history_factors(
-            self.grid,
-            cell,
-            self.history,
-            p.sigma_x,
-            p.sigma_y,
-            zero_lag=p.zero_lag,
-            drift_spread=p.drift_spread,
-        )
+        px, py = self._filament_factors(cell)
         return log_non_detection(px, py, p.mu)
 
     def _event_probability(self, cell: int, detected: bool) -> FloatArray:
