@@ -221,12 +221,13 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     return path, value
 
 
-def _apply(data: dict[str, Any], path: list[str], value: Any) -> None:
+def apply_override(data: dict[str, Any], path: list[str], value: Any, text: str) -> None:
+    """Set ``value`` at the nested ``path`` of a parsed TOML mapping (``text``: the --set given)."""
     node = data
     for part in path[:-1]:
         child = node.setdefault(part, {})
         if not isinstance(child, dict):
-            raise ConfigError(f"--set {'.'.join(path)}: {part} is not a section")
+            raise ConfigError(f"--set {text}: {part} is not a table")
         node = child
     node[path[-1]] = value
 
@@ -249,7 +250,7 @@ def build_config(data: dict[str, Any], overrides: Sequence[str] = (), origin: st
     merged = {k: dict(v) if isinstance(v, dict) else v for k, v in data.items()}
     for text in overrides:
         path, value = parse_override(text)
-        _apply(merged, path, value)
+        apply_override(merged, path, value, text)
     try:
         return Config.model_validate(merged)
     except ValidationError as exc:

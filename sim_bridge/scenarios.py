@@ -22,7 +22,7 @@ from typing import Annotated, Any, Literal, Self
 import numpy as np
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
 
-from service.config import Config, build_config, parse_override
+from service.config import Config, apply_override, build_config, parse_override
 from service.errors import ConfigError
 from service.grid import Grid
 from sim_bridge.autopilot import AUTOPILOTS, VehicleKind
@@ -207,13 +207,7 @@ def _put(data: dict[str, Any], path: list[str], value: Any, text: str) -> None:
     other = _ALTERNATIVES.get(tuple(path))
     if other is not None and isinstance(data.get(other[0]), dict):
         data[other[0]].pop(other[1], None)
-    node = data
-    for part in path[:-1]:
-        child = node.setdefault(part, {})
-        if not isinstance(child, dict):
-            raise ConfigError(f"--set {text}: {part} is not a table")
-        node = child
-    node[path[-1]] = value
+    apply_override(data, path, value, text)
 
 
 def load_scenario(name_or_path: str | Path, overrides: tuple[str, ...] | list[str] = ()) -> Scenario:
