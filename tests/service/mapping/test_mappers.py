@@ -11,6 +11,11 @@ from service.mapping.pomdp import PomdpMapper
 from service.observation import Observation
 
 SMALL = Grid(0.0, 12.0, 0.0, 8.0, columns=6, rows=4)
+FIELD = Grid(0.0, 100.0, -50.0, 50.0, columns=50, rows=50)
+
+
+def centroid(pi: np.ndarray, grid: Grid) -> np.ndarray:
+    return np.array([(pi.sum(axis=0) * grid.x_centres).sum(), (pi.sum(axis=1) * grid.y_centres).sum()])
 
 
 def random_observations(rng: np.random.Generator, count: int) -> list[Observation]:
@@ -63,6 +68,38 @@ def test_impossible_event_leaves_the_map_alone(mapper_class: type[SourceMapper])
     assert mapper.update(Observation(2.0, 5.0, 5.0, 100.0, 0.0, True))
     assert mapper.ignored == {"impossible_event": 1}
     np.testing.assert_array_equal(mapper.likelihood, before)
+
+
+@pytest.mark.parametrize("mapper_class", [BayesMapper, PomdpMapper])
+@pytest.mark.parametrize("flow", [(1.0, 0.5), (-1.0, -0.5), (0.0, 1.2)])
+def test_detection_moves_mass_upflow(mapper_class: type[SourceMapper], flow: tuple[float, float]) -> None:
+    u = np.array(flow)
+    unit = u / np.linalg.norm(u)
+    mapper = mapper_class(FIELD, MapperParams(window=40))
+    # the flow history, with the vehicle outside the area (nothing fused)
+    for k in range(40):
+        assert not mapper.update(Observation(float(k), -10.0, -60.0, flow[0], flow[1], False))
+    t = 40.0
+    before = mapper.likelihood.copy()
+    vehicle = np.array([51.0, 1.0])  # the centre cell: the uniform prior's centroid is the vehicle
+    mapper.update(Observation(t, float(vehicle[0]), float(vehicle[1]), *flow, True))
+    after = mapper.likelihood
+    xs, ys = np.meshgrid(FIELD.x_centres, FIELD.y_centres)
+    along = (xs - vehicle[0]) * unit[0] + (ys - vehicle[1]) * unit[1]
+    across = np.abs((xs - vehicle[0]) * unit[1] - (ys - vehicle[1]) * unit[0])
+    behind = along < 0.0
+    assert after[behind].sum() > 0.9
+    assert before[behind].sum() < 0.55
+    # the upflow corridor within the window's reach (40 s of flow) gathers most of the mass
+    corridor = behind & (along > -45.0 * np.linalg.norm(u)) & (across < 8.0)
+    assert before[corridor].sum() < 0.1
+    assert after[corridor].sum() > 0.6
+    assert (centroid(before, FIELD) - vehicle) @ unit == pytest.approx(0.0, abs=1.5)
+    assert (centroid(after, FIELD) - vehicle) @ unit < -15.0
+    estimate = mapper.estimate()
+    offset = np.array([estimate.x, estimate.y]) - vehicle
+    assert offset @ unit < 0.0
+    assert abs(offset[0] * unit[1] - offset[1] * unit[0]) < 3.0
 
 
 def test_every_registered_mapper_is_covered() -> None:

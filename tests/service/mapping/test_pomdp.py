@@ -155,32 +155,6 @@ def test_mu_one_filament_certainly_there_rules_the_cell_out() -> None:
     assert pi.max() == pytest.approx(1.0 / 99)
 
 
-def centroid(pi: np.ndarray, grid: Grid) -> np.ndarray:
-    return np.array([(pi.sum(axis=0) * grid.x_centres).sum(), (pi.sum(axis=1) * grid.y_centres).sum()])
-
-
-@pytest.mark.parametrize("flow", [(1.0, 0.5), (-1.0, -0.5), (0.0, 1.2)])
-def test_detection_moves_mass_upflow(flow: tuple[float, float]) -> None:
-    u = np.array(flow)
-    unit = u / np.linalg.norm(u)
-    mapper = PomdpMapper(FIELD, MapperParams(window=40))
-    t = history_then(mapper, 40, flow)
-    before = mapper.likelihood.copy()
-    vehicle = np.array([51.0, 1.0])  # the centre cell: the uniform prior's centroid is the vehicle
-    mapper.update(Observation(t, float(vehicle[0]), float(vehicle[1]), *flow, True))
-    after = mapper.likelihood
-    xs, ys = np.meshgrid(FIELD.x_centres, FIELD.y_centres)
-    along = (xs - vehicle[0]) * unit[0] + (ys - vehicle[1]) * unit[1]
-    across = np.abs((xs - vehicle[0]) * unit[1] - (ys - vehicle[1]) * unit[0])
-    assert after[along < 0.0].sum() > 0.9
-    assert before[along < 0.0].sum() < 0.55
-    corridor = (along < 0.0) & (along > -45.0 * np.linalg.norm(u)) & (across < 8.0)
-    assert before[corridor].sum() < 0.1
-    assert after[corridor].sum() > 0.6
-    assert (centroid(before, FIELD) - vehicle) @ unit == pytest.approx(0.0, abs=1.5)
-    assert (centroid(after, FIELD) - vehicle) @ unit < -15.0
-
-
 def test_non_detection_removes_mass_just_upflow() -> None:
     mapper = PomdpMapper(FIELD, MapperParams(window=40))
     t = history_then(mapper, 40, (1.0, 0.0))
