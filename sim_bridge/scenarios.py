@@ -109,6 +109,9 @@ class PlumeSpec(_Spec):
     max_puffs: int = Field(default=50_000, ge=1, le=10_000_000)
     margin_m: float = Field(default=20.0, ge=0)
     """Puffs are dropped beyond the search area grown by this margin."""
+    spin_up_s: float = Field(default=0.0, ge=0, le=3600)
+    """The source has been releasing for this long when the mission starts (0: it starts with the
+    mission, the plume still empty). The flow's clock runs through the spin-up too."""
 
 
 class VehicleSpec(_Spec):
@@ -408,9 +411,14 @@ def build_world(scenario: Scenario, seed: int | None = None) -> World:
         hold_s=d.hold_s,
     )
     v = world.vehicle
+    flow = _flow(world.flow, placement.mean_flow_mps, flow_rng)
+    plume = PuffPlume(placement.source_m, puff_params, bounds, plume_rng)
+    for _ in range(round(p.spin_up_s / world.dt_s)):
+        plume.step(world.dt_s, flow)
+        flow.advance(world.dt_s)
     return World(
-        flow=_flow(world.flow, placement.mean_flow_mps, flow_rng),
-        plume=PuffPlume(placement.source_m, puff_params, bounds, plume_rng),
+        flow=flow,
+        plume=plume,
         detector=BinaryDetector(detector, detector_rng),
         vehicle=VehicleState(
             x_m=placement.start_m[0], y_m=placement.start_m[1], heading_rad=math.radians(90.0 - v.heading_deg)

@@ -150,3 +150,16 @@ def test_unknown_names_and_bad_files_are_reported(tmp_path: Path) -> None:
         load_scenario(both)
     with pytest.raises(ConfigError, match="no such scenario file"):
         load_scenario(tmp_path / "absent.toml")
+
+
+def test_spin_up_starts_the_mission_with_a_developed_plume() -> None:
+    cold = build_world(load_scenario("farrell2003"), seed=3)
+    warm = build_world(load_scenario("farrell2003", ["world.plume.spin_up_s=60"]), seed=3)
+    assert cold.plume.count == 0
+    assert warm.time_s == 0.0  # the mission clock starts after the spin-up
+    puffs = warm.plume.puffs()
+    assert len(puffs) > 500
+    assert puffs[:, 3].max() == pytest.approx(60.0, abs=0.2)  # the oldest puff is as old as the spin-up
+    assert puffs[:, 0].max() > 20.0 + 40.0  # carried some 60 m East at about 1 m/s
+    # the same seed places source and vehicle alike
+    assert (warm.vehicle.x_m, warm.vehicle.y_m) == (cold.vehicle.x_m, cold.vehicle.y_m)
