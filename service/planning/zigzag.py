@@ -30,6 +30,7 @@ def zigzag_vertices(
     spacing_m: float,
     *,
     upflow: bool = True,
+    diagonal_start: bool = False,
 ) -> tuple[Waypoint, ...]:
     """Turning points of a zigzag from (x, y) to the upflow (or downflow) edge of the area.
 
@@ -40,6 +41,11 @@ def zigzag_vertices(
     farthest to its side: each leg then spans the whole cross-section of the band between its
     lines, and every cell is crossed within two spacings along the flow (one when the flow is
     parallel to an edge of the area). All vertices are inside the hull of the cell centres.
+
+    With ``diagonal_start`` the first vertex is on line 1, at the far side: the first leg already
+    advances along the flow instead of crossing at the start's own line. A plume is detectable
+    only so far downflow of its source, so a start far downflow gains a spacing of advance per
+    leg from the first one on.
     """
     if not (math.isfinite(spacing_m) and spacing_m > 0.0):
         raise ValueError(f"zigzag spacing must be positive, got {spacing_m}")
@@ -54,6 +60,9 @@ def zigzag_vertices(
         return ()
     s = frame.cross(x, y)
     side = 1.0 if first[1] - s >= s - first[0] else -1.0
+    skip = diagonal_start and len(lines) > 1
+    if skip:
+        side = -side
     x0, y0, x1, y1 = centre_hull(grid)
     corners = [(cx, cy) for cx in (x0, x1) for cy in (y0, y1)]
     vertices: list[Waypoint] = []
@@ -76,4 +85,4 @@ def zigzag_vertices(
                     best = c
             vertices.append(best)
         side = -side
-    return tuple(vertices)
+    return tuple(vertices[1:] if skip else vertices)

@@ -140,3 +140,21 @@ def test_cast_is_clipped_to_the_area_and_merges_repeats() -> None:
     assert [v.y for v in verts] == pytest.approx([top, 30.0, 20.0, 10.0])
     assert all(bottom <= v.y <= top and v.x == pytest.approx(20.0) for v in verts)
     assert cast_vertices(PAPER, 20.0, 40.0, frame, 10.0, 0) == ()
+
+
+def test_a_diagonal_start_advances_from_the_first_leg() -> None:
+    frame = FlowFrame.from_flow(1.0, 0.0)  # flow East: legs run North-South, advancing West
+    across = zigzag_vertices(PAPER, 90.0, 10.0, frame, 10.0)
+    diagonal = zigzag_vertices(PAPER, 90.0, 10.0, frame, 10.0, diagonal_start=True)
+    y_lo, y_hi = PAPER.y_centres[0], PAPER.y_centres[-1]
+    # across: the first leg crosses at the start's own line, to the far side (South from y = 10)
+    assert (across[0].x, across[0].y) == (90.0, pytest.approx(y_lo))
+    # diagonal: the first leg already ends a spacing upflow, on that far side
+    assert (diagonal[0].x, diagonal[0].y) == (80.0, pytest.approx(y_lo))
+    # then the same zigzag, alternating sides a spacing apart, one leg fewer
+    assert [v.x for v in diagonal] == [v.x for v in across[1:]]
+    assert [round(v.y, 6) for v in diagonal] == [round(v.y, 6) for v in across[:-1]]
+    assert {round(v.y, 6) for v in diagonal} == {round(y_lo, 6), round(y_hi, 6)}
+    # a start already on the upflow edge has no line to advance to: the leg across is kept
+    edge = zigzag_vertices(PAPER, PAPER.x_centres[0], 10.0, frame, 10.0, diagonal_start=True)
+    assert edge == zigzag_vertices(PAPER, PAPER.x_centres[0], 10.0, frame, 10.0)
