@@ -108,6 +108,7 @@ class MappingConfig(_Section):
     sigma_x: float = Field(default=0.2, gt=0)
     sigma_y: float = Field(default=0.2, gt=0)
     drift_spread: float = Field(default=0.0, ge=0)
+    forgetting: float = Field(default=0.0, ge=0, lt=1)
     zero_lag: bool = True
     epsilon_d: float = Field(default=0.2, gt=0, lt=1)
     epsilon_c: float = Field(default=0.02, gt=0, lt=1)
@@ -134,6 +135,8 @@ class PlanningConfig(_Section):
     apf_obstacle_gain: float = Field(default=1.0, ge=0)
     apf_obstacle_range_m: float = Field(default=5.0, gt=0)
     zigzag_spacing_m: float = Field(default=10.0, gt=0)
+    zigzag_diagonal_start: bool = False
+    """The first zigzag leg advances a spacing along the flow instead of crossing at the start's line."""
     cast_width_m: float = Field(default=10.0, gt=0)
     cast_legs: int = Field(default=4, ge=0, le=100)
     lost_after_s: float = Field(default=20.0, gt=0)
@@ -166,6 +169,11 @@ class DeclarationConfig(_Section):
     (along the mean flow, within ``visit_radius_m`` across it) since it became the estimate, m
     (0: off). Bayesian mappers only: the hmm's estimate mostly sits in the vehicle's own cell and
     moves with it, so it is seldom passed (farrell2003, hmm + astar, 100 runs: 45 % -> 32 %)."""
+    check_width_m: float = Field(default=0.0, ge=0)
+    """Before naming a cell, cross the flow ``check_upflow_m`` upflow of its centre, this far to
+    either side, m (0: off); odour found upflow there calls the declaration off."""
+    check_upflow_m: float = Field(default=3.0, gt=0)
+    """How far upflow of the estimated cell's centre the check crosses the flow, m."""
 
     def for_mapper(self, mapper: str) -> DeclarationConfig:
         """This configuration as it applies to the mapper named ``mapper``: ``hmm_probability``

@@ -10,7 +10,11 @@ tracing, and source declaration". The states:
 - ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
   last detection (``planning.cast``), then the planner again. A detection returns to ``TRACE``.
 - ``DECLARED``: a declaration rule fired (``planning.declaration``); the vehicle holds. Rules are
-  only judged after the first detection: before it a flat map's argmax never moves.
+  only judged after the first detection: before it a flat map's argmax never moves. With
+  ``declaration.check_width_m`` > 0 a rule that fires first sends the vehicle across the flow
+  ``check_upflow_m`` upflow of the estimate and back (still ``TRACE``); odour found upflow there,
+  or another estimate, calls the declaration off. A plume that swung off the vehicle's line looks
+  to the maps like the upflow end of a plume; the check looks for it where it would be.
 
 ``Mission.step`` is pure: its inputs are this tick's observation (whose ``time_s`` is the only
 clock) and the vehicle state; it updates the mapper it was given and returns the waypoints to fly
@@ -28,6 +32,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from enum import StrEnum
 from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
 
 from service.config import DeclarationConfig, DeclarationRule, PlanningConfig
 from service.errors import NoPathError
@@ -115,6 +121,27 @@ class MissionOutput:
     estimate: Estimate
 
 
+@dataclass
+class _Check:
+    """The upflow check of ``cell`` (centre ``centre``): a cross-flow pass ``check_upflow_m``
+    upflow of it, then back to the centre. Odour ``cancel_upflow_m`` or more upflow of the centre,
+    or another estimated cell, calls it off."""
+
+    cell: int
+    centre: tuple[float, float]
+    frame: FlowFrame
+    cancel_upflow_m: float
+    done: bool = False
+
+    def holds(self, obs: Observation, estimated_cell: int) -> bool:
+        if estimated_cell != self.cell:
+            return False
+        if not obs.detected:
+            return True
+        dx, dy = obs.x - self.centre[0], obs.y - self.centre[1]
+        return -(dx * self.frame.ux + dy * self.frame.uy) < self.cancel_upflow_m
+
+
 class Mission:
     """One search mission over ``grid`` with ``mapper``; call ``step`` once per tick."""
 
@@ -135,7 +162,9 @@ class Mission:
         self.planner = planner if planner is not None else make_planner(grid, self.planning)
         self._router = AStarPlanner(grid, self.planning)  # zigzag, cast and fallback legs
         self._reach = Reachability(grid)
-        self._declarer = Declarer(grid, (declaration or DeclarationConfig()).for_mapper(mapper.name))
+        self._declaration = (declaration or DeclarationConfig()).for_mapper(mapper.name)
+        self._declarer = Declarer(grid, self._declaration)
+        self._check: _Check | None = None  # the upflow check of a cell about to be declared
         self._state = MissionState.FIND
         self._last_time: float | None = None
         self._last_detection: tuple[float, float, float] | None = None  # (t, x, y)
@@ -217,6 +246,8 @@ class Mission:
         if self._state is MissionState.DECLARED:
             return events
         t = obs.time_s
+        if self._check is not None and not self._check.holds(obs, self._estimated_cell()):
+            self._end_check()
         if obs.detected:
             if self._state is not MissionState.TRACE:
                 events.append(PlumeFound(t, obs.x, obs.y, first=self._state is MissionState.FIND))
@@ -226,13 +257,13 @@ class Mission:
             self._last_detection = (t, obs.x, obs.y)
         elif self._state is MissionState.TRACE and self._last_detection is not None:
             t_last, x_last, y_last = self._last_detection
-            if t - t_last >= self.planning.lost_after_s:
+            if t - t_last >= self.planning.lost_after_s and self._check is None:
                 events.append(PlumeLost(t, x_last, y_last, t_last))
                 self._enter(MissionState.LOST)
         if self._declarer.armed:
             flow = None if self._frame is None else (self._frame.ux, self._frame.uy)
             found = self._declarer.update(t, self.mapper.likelihood, (obs.x, obs.y), flow)
-            if found is not None:
+            if found is not None and self._checked(found.cell):
                 events.append(
                     SourceDeclared(
                         time_s=t,
@@ -247,7 +278,32 @@ class Mission:
                 self._enter(MissionState.DECLARED)
         return events
 
+    def _estimated_cell(self) -> int:
+        return int(np.argmax(self.mapper.likelihood))
+
+    def _checked(self, cell: int) -> bool:
+        """Whether ``cell`` may be declared now: the upflow check is off or has been flown for it
+        with no odour upflow; otherwise the check of ``cell`` is started (or goes on)."""
+        width = self._declaration.check_width_m
+        if width <= 0.0 or self._frame is None:
+            return True
+        if self._check is not None and self._check.cell == cell:
+            return self._check.done
+        cx, cy = self.grid.centre(cell)
+        frame, upflow = self._frame, self._declaration.check_upflow_m
+        ax, ay = cx - upflow * frame.ux, cy - upflow * frame.uy
+        legs = cast_vertices(self.grid, ax, ay, frame, width, 2)
+        self._check = _Check(cell, (cx, cy), frame, 0.5 * upflow)
+        self._pattern, self._pattern_index = (*legs, Waypoint(cx, cy)), 0
+        self._probe = None
+        return False
+
+    def _end_check(self) -> None:
+        self._check = None
+        self._pattern, self._pattern_index = (), 0
+
     def _enter(self, state: MissionState) -> None:
+        self._check = None
         self._state = state
         self._pattern, self._pattern_index = (), 0
         self._probe = None
@@ -273,11 +329,23 @@ class Mission:
         v = ctx.vehicle
         self._sweep_frame = frame
         self._pattern = zigzag_vertices(
-            self.grid, v.x, v.y, frame, self.planning.zigzag_spacing_m, upflow=self._sweep_upflow
+            self.grid,
+            v.x,
+            v.y,
+            frame,
+            self.planning.zigzag_spacing_m,
+            upflow=self._sweep_upflow,
+            diagonal_start=self.planning.zigzag_diagonal_start,
         )
         self._pattern_index = 0
 
     def _trace(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
+        if self._check is not None and not self._check.done:
+            wanted = self._follow_pattern(ctx)
+            if wanted is not None:
+                return wanted
+            self._check.done = True  # back at the centre: hold there for the rule to be judged
+            return (Waypoint(*self._check.centre),)
         if self._probe is not None and self._probe != ctx.cell:
             # a probe beyond an obstacle is a detour: replanning toward the estimate each tick
             # would turn back at the first step off it, so the probe is flown until reached
@@ -340,6 +408,8 @@ class Mission:
             distance_m += step_m
 
     def _lost(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
+        if self._check is not None:
+            return self._trace(ctx)
         wanted = self._follow_pattern(ctx)
         return wanted if wanted is not None else self._trace(ctx)
 

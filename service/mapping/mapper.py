@@ -40,6 +40,11 @@ class MapperParams:
     """Gain k of the drift uncertainty (filament eq. D1), dimensionless: a filament of lag tau gets an
     extra per-axis spread k s tau, s the std (m/s) of that flow component over the window
     (Bayesian and POMDP mappers; 0: the papers' model)."""
+    forgetting: float = 0.0
+    """Share of pi handed back to the uniform prior after each update (Bayesian and POMDP
+    mappers; 0: the papers' models). The models take the flow at the vehicle for the flow
+    everywhere; where it is not, they rule out true sources, and a flat share lets later
+    detections bring such a cell back."""
     mu: float = 0.9
     """P(detect | detectable odour in the cell): the papers' mu."""
     false_alarm: float = 0.001
@@ -66,6 +71,8 @@ class MapperParams:
             raise ValueError(f"need 0 < mu <= 1 and 0 <= false_alarm < 1, got {self.mu}, {self.false_alarm}")
         if not self.drift_spread >= 0.0:
             raise ValueError(f"drift_spread must be >= 0, got {self.drift_spread}")
+        if not 0 <= self.forgetting < 1:
+            raise ValueError(f"forgetting must be in [0, 1), got {self.forgetting}")
         if not 0 <= self.miss_floor < 1:
             raise ValueError(f"miss_floor must be in [0, 1), got {self.miss_floor}")
         if not (0 < self.epsilon_d < 1 and 0 < self.epsilon_c < 1):
@@ -79,6 +86,7 @@ class MapperParams:
             sigma_x=m.sigma_x,
             sigma_y=m.sigma_y,
             drift_spread=m.drift_spread,
+            forgetting=m.forgetting,
             mu=s.detection_probability,
             false_alarm=s.false_alarm_probability,
             miss_floor=s.miss_floor,
@@ -267,3 +275,6 @@ class ObservationModelMapper(SourceMapper):
             return
         # posterior proportional to P(event | source) prior (reactive-planning §II-B, pomdp-astar eq. 6)
         self._pi = bayes_update(self._pi, likelihood)
+        if self.params.forgetting > 0.0:
+            share = self.params.forgetting
+            self._pi = (1.0 - share) * self._pi + share / self._pi.size

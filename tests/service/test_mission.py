@@ -464,3 +464,76 @@ def test_a_cast_turning_point_in_a_blocked_cell_does_not_stall_the_cast() -> Non
         positions.append((round(vehicle.x, 3), round(vehicle.y, 3)))
     assert mission.state in (MissionState.LOST, MissionState.TRACE)
     assert len(set(positions[-10:])) > 1  # still moving
+
+
+def check_mission(mapper: SourceMapper) -> Mission:
+    return mission_with(
+        mapper, rules=[DeclarationRule.MASS], probability=0.8, check_width_m=6.0, check_upflow_m=3.0
+    )
+
+
+def test_the_upflow_check_crosses_the_flow_upflow_of_the_estimate_before_declaring() -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.9)
+    mission = check_mission(mapper)
+    sx, sy = AREA.centre(SOURCE)
+    vehicle = Vehicle(sx, sy)
+    out = mission.step(Observation(0.0, sx, sy, 1.0, 0.0, True), vehicle.state)
+    assert out.state is MissionState.TRACE  # the rule fires, but the check comes first
+    assert out.waypoints is not None
+    visited = []
+    for t in range(1, 10):
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        visited.append((vehicle.x, vehicle.y))
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, False), vehicle.state)
+        if out.state is MissionState.DECLARED:
+            break
+    assert out.state is MissionState.DECLARED
+    # flow East: 3 m West of the centre, 6 m to one side, then the other, then back (and hold)
+    assert visited == [(sx - 3.0, sy + 6.0), (sx - 3.0, sy - 6.0), (sx, sy), (sx, sy)]
+    (declared,) = out.events
+    assert isinstance(declared, SourceDeclared)
+    assert (declared.x, declared.y) == (sx, sy)
+
+
+def test_odour_upflow_of_the_estimate_calls_the_check_off() -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.9)
+    mission = check_mission(mapper)
+    sx, sy = AREA.centre(SOURCE)
+    vehicle = Vehicle(sx, sy)
+    out = mission.step(Observation(0.0, sx, sy, 1.0, 0.0, True), vehicle.state)
+    vehicle.follow(out.waypoints)
+    vehicle.move()  # on the check's first turning point, 3 m upflow
+    assert (vehicle.x, vehicle.y) == (sx - 3.0, sy + 6.0)
+    out = mission.step(Observation(1.0, vehicle.x, vehicle.y, 1.0, 0.0, True), vehicle.state)
+    # odour 3 m upflow: not declared; the rule fires again at once (the scripted map does not
+    # move), so a new check starts from here, and it must be flown whole before a declaration
+    assert out.state is MissionState.TRACE
+    assert out.events == ()
+    visited = []
+    for t in range(2, 12):
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        visited.append((vehicle.x, vehicle.y))
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, False), vehicle.state)
+        if out.state is MissionState.DECLARED:
+            break
+    assert out.state is MissionState.DECLARED
+    assert (sx - 3.0, sy - 6.0) in visited  # the far side of the new check
+    assert visited[-2:] == [(sx, sy), (sx, sy)]
+
+
+def test_odour_at_the_estimate_does_not_call_the_check_off() -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.9)
+    mission = check_mission(mapper)
+    sx, sy = AREA.centre(SOURCE)
+    vehicle = Vehicle(sx, sy)
+    out = mission.step(Observation(0.0, sx, sy, 1.0, 0.0, True), vehicle.state)
+    first_leg = out.waypoints
+    # odour 1 m downflow of the centre is what a source there gives: the check goes on
+    out = mission.step(Observation(1.0, sx + 1.0, sy, 1.0, 0.0, True), vehicle.state)
+    assert out.state is MissionState.TRACE
+    assert out.waypoints is None or out.waypoints == first_leg

@@ -105,3 +105,25 @@ def test_detection_moves_mass_upflow(mapper_class: type[SourceMapper], flow: tup
 def test_every_registered_mapper_is_covered() -> None:
     # a new mapper joins the parametrisations above (hmm's invariants are in test_hmm.py)
     assert set(MAPPERS) == {"hmm", "bayes", "pomdp"}
+
+
+@pytest.mark.parametrize("mapper_class", [BayesMapper, PomdpMapper])
+def test_forgetting_hands_a_share_back_to_the_uniform_prior(mapper_class: type[SourceMapper]) -> None:
+    share = 0.01
+    plain = mapper_class(FIELD, MapperParams(window=30, sigma_x=0.3, sigma_y=0.3))
+    forgetful = mapper_class(FIELD, MapperParams(window=30, sigma_x=0.3, sigma_y=0.3, forgetting=share))
+    first = Observation(0.0, 40.0, 0.0, 1.0, 0.0, True)
+    plain.update(first)
+    forgetful.update(first)
+    np.testing.assert_allclose(
+        forgetful.likelihood, (1.0 - share) * plain.likelihood + share / FIELD.size, rtol=1e-12
+    )
+    # a long run of misses all but rules out the cells upflow in the plain map; the forgetful one
+    # keeps every cell at the floor share / N, so later odour can bring a cell back
+    for t in range(1, 60):
+        obs = Observation(float(t), 40.0, 0.0, 1.0, 0.0, False)
+        plain.update(obs)
+        forgetful.update(obs)
+    assert plain.likelihood.min() < 1e-6 * share / FIELD.size
+    assert forgetful.likelihood.min() >= share / FIELD.size * (1.0 - 1e-12)
+    assert forgetful.likelihood.sum() == pytest.approx(1.0)
