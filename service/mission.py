@@ -12,9 +12,10 @@ tracing, and source declaration". The states:
 - ``DECLARED``: a declaration rule fired (``planning.declaration``); the vehicle holds. Rules are
   only judged after the first detection: before it a flat map's argmax never moves. With
   ``declaration.check_width_m`` > 0 a rule that fires first sends the vehicle across the flow
-  ``check_upflow_m`` upflow of the estimate and back (still ``TRACE``); odour found upflow there,
-  or another estimate, calls the declaration off. A plume that swung off the vehicle's line looks
-  to the maps like the upflow end of a plume; the check looks for it where it would be.
+  ``check_upflow_m`` upflow of the estimate (still ``TRACE``), and the source is declared when
+  that pass is flown; odour found upflow of the estimate, or another estimate, calls it off. A
+  plume that swung off the vehicle's line looks to the maps like the upflow end of a plume; the
+  check looks for it where it would be.
 
 ``Mission.step`` is pure: its inputs are this tick's observation (whose ``time_s`` is the only
 clock) and the vehicle state; it updates the mapper it was given and returns the waypoints to fly
@@ -42,7 +43,7 @@ from service.planning.astar import AStarPlanner
 from service.planning.base import PlanContext, Waypoint
 from service.planning.cast import cast_vertices
 from service.planning.crossflow import FlowFrame
-from service.planning.declaration import Declarer
+from service.planning.declaration import Declarer, mass_within
 from service.planning.reach import Reachability
 from service.planning.safety import clamped_cell, safe_plan, segment_clear
 from service.planning.zigzag import zigzag_vertices
@@ -53,6 +54,7 @@ if TYPE_CHECKING:
     from service.mapping.mapper import Estimate, SourceMapper
     from service.observation import Observation
     from service.planning.base import Planner, VehicleState
+    from service.planning.declaration import Declaration
 
 SWEEP_REDRAW_RAD = math.pi / 4.0
 """A zigzag is laid out anew when the flow has turned more than this since it was laid out."""
@@ -123,10 +125,11 @@ class MissionOutput:
 
 @dataclass
 class _Check:
-    """The upflow check of ``cell`` (centre ``centre``): a cross-flow pass ``check_upflow_m``
-    upflow of it, then back to the centre. Odour ``cancel_upflow_m`` or more upflow of the centre,
-    or another estimated cell, calls it off."""
+    """The upflow check of ``cell`` (centre ``centre``), where a rule fired (``found``): a
+    cross-flow pass ``check_upflow_m`` upflow of it. Odour ``cancel_upflow_m`` or more upflow of
+    the centre, or another estimated cell, calls it off."""
 
+    found: Declaration
     cell: int
     centre: tuple[float, float]
     frame: FlowFrame
@@ -263,7 +266,18 @@ class Mission:
         if self._declarer.armed:
             flow = None if self._frame is None else (self._frame.ux, self._frame.uy)
             found = self._declarer.update(t, self.mapper.likelihood, (obs.x, obs.y), flow)
-            if found is not None and self._checked(found.cell):
+            if self._check is not None and self._check.done:
+                # flown with no odour upflow: the rule fired at the estimate when the check began
+                lik = self.mapper.likelihood
+                found = replace(
+                    self._check.found,
+                    time_s=t,
+                    probability=float(lik.flat[self._check.cell]),
+                    mass=mass_within(self.grid, lik, self._check.cell, self._declaration.radius_m),
+                )
+            elif found is not None and not self._checked(found):
+                found = None
+            if found is not None:
                 events.append(
                     SourceDeclared(
                         time_s=t,
@@ -281,20 +295,21 @@ class Mission:
     def _estimated_cell(self) -> int:
         return int(np.argmax(self.mapper.likelihood))
 
-    def _checked(self, cell: int) -> bool:
-        """Whether ``cell`` may be declared now: the upflow check is off or has been flown for it
-        with no odour upflow; otherwise the check of ``cell`` is started (or goes on)."""
+    def _checked(self, found: Declaration) -> bool:
+        """Whether ``found`` may be declared now (the upflow check is off); otherwise the check of
+        its cell is started, or goes on."""
         width = self._declaration.check_width_m
         if width <= 0.0 or self._frame is None:
             return True
+        cell = found.cell
         if self._check is not None and self._check.cell == cell:
-            return self._check.done
+            return False
         cx, cy = self.grid.centre(cell)
         frame, upflow = self._frame, self._declaration.check_upflow_m
         ax, ay = cx - upflow * frame.ux, cy - upflow * frame.uy
         legs = cast_vertices(self.grid, ax, ay, frame, width, 2)
-        self._check = _Check(cell, (cx, cy), frame, 0.5 * upflow)
-        self._pattern, self._pattern_index = (*legs, Waypoint(cx, cy)), 0
+        self._check = _Check(found, cell, (cx, cy), frame, 0.5 * upflow)
+        self._pattern, self._pattern_index = legs, 0
         self._probe = None
         return False
 
@@ -344,8 +359,8 @@ class Mission:
             wanted = self._follow_pattern(ctx)
             if wanted is not None:
                 return wanted
-            self._check.done = True  # back at the centre: hold there for the rule to be judged
-            return (Waypoint(*self._check.centre),)
+            self._check.done = True  # declared at the next tick
+            return (Waypoint(ctx.vehicle.x, ctx.vehicle.y),)
         if self._probe is not None and self._probe != ctx.cell:
             # a probe beyond an obstacle is a detour: replanning toward the estimate each tick
             # would turn back at the first step off it, so the probe is flown until reached

@@ -490,8 +490,8 @@ def test_the_upflow_check_crosses_the_flow_upflow_of_the_estimate_before_declari
         if out.state is MissionState.DECLARED:
             break
     assert out.state is MissionState.DECLARED
-    # flow East: 3 m West of the centre, 6 m to one side, then the other, then back (and hold)
-    assert visited == [(sx - 3.0, sy + 6.0), (sx - 3.0, sy - 6.0), (sx, sy), (sx, sy)]
+    # flow East: 3 m West of the centre, 6 m to one side, then the other; declared there
+    assert visited == [(sx - 3.0, sy + 6.0), (sx - 3.0, sy - 6.0), (sx - 3.0, sy - 6.0)]
     (declared,) = out.events
     assert isinstance(declared, SourceDeclared)
     assert (declared.x, declared.y) == (sx, sy)
@@ -521,8 +521,7 @@ def test_odour_upflow_of_the_estimate_calls_the_check_off() -> None:
         if out.state is MissionState.DECLARED:
             break
     assert out.state is MissionState.DECLARED
-    assert (sx - 3.0, sy - 6.0) in visited  # the far side of the new check
-    assert visited[-2:] == [(sx, sy), (sx, sy)]
+    assert visited[-2:] == [(sx - 3.0, sy - 6.0)] * 2  # the far side of the new check, then declared
 
 
 def test_odour_at_the_estimate_does_not_call_the_check_off() -> None:
@@ -537,3 +536,24 @@ def test_odour_at_the_estimate_does_not_call_the_check_off() -> None:
     out = mission.step(Observation(1.0, sx + 1.0, sy, 1.0, 0.0, True), vehicle.state)
     assert out.state is MissionState.TRACE
     assert out.waypoints is None or out.waypoints == first_leg
+
+
+def test_a_new_estimate_calls_the_check_off() -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.9)
+    mission = check_mission(mapper)
+    sx, sy = AREA.centre(SOURCE)
+    vehicle = Vehicle(sx, sy)
+    out = mission.step(Observation(0.0, sx, sy, 1.0, 0.0, True), vehicle.state)
+    vehicle.follow(out.waypoints)
+    vehicle.move()
+    other = AREA.cell_of(sx - 20.0, sy)
+    mapper.peak_at(other, 0.9)  # the map now names a cell 20 m upflow
+    for t in range(1, 4):
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, False), vehicle.state)
+        assert out.state is MissionState.TRACE
+        assert out.events == ()
+    # on its way to the new estimate, not on the old check's legs
+    assert vehicle.x < sx - 3.0
