@@ -125,23 +125,25 @@ class MissionOutput:
 
 @dataclass
 class _Check:
-    """The upflow check of ``cell`` (centre ``centre``), where a rule fired (``found``): a
-    cross-flow pass ``check_upflow_m`` upflow of it. Odour ``cancel_upflow_m`` or more upflow of
-    the centre, or another estimated cell, calls it off."""
+    """The upflow check of the cell where a rule fired (``found``): a cross-flow pass
+    ``check_upflow_m`` upflow of its centre. Odour ``cancel_upflow_m`` or more upflow of the
+    centre, or another estimated cell, calls it off."""
 
     found: Declaration
-    cell: int
-    centre: tuple[float, float]
     frame: FlowFrame
     cancel_upflow_m: float
     done: bool = False
+
+    @property
+    def cell(self) -> int:
+        return self.found.cell
 
     def holds(self, obs: Observation, estimated_cell: int) -> bool:
         if estimated_cell != self.cell:
             return False
         if not obs.detected:
             return True
-        dx, dy = obs.x - self.centre[0], obs.y - self.centre[1]
+        dx, dy = obs.x - self.found.x, obs.y - self.found.y
         return -(dx * self.frame.ux + dy * self.frame.uy) < self.cancel_upflow_m
 
 
@@ -301,14 +303,12 @@ class Mission:
         width = self._declaration.check_width_m
         if width <= 0.0 or self._frame is None:
             return True
-        cell = found.cell
-        if self._check is not None and self._check.cell == cell:
+        if self._check is not None and self._check.cell == found.cell:
             return False
-        cx, cy = self.grid.centre(cell)
         frame, upflow = self._frame, self._declaration.check_upflow_m
-        ax, ay = cx - upflow * frame.ux, cy - upflow * frame.uy
+        ax, ay = found.x - upflow * frame.ux, found.y - upflow * frame.uy
         legs = cast_vertices(self.grid, ax, ay, frame, width, 2)
-        self._check = _Check(found, cell, (cx, cy), frame, 0.5 * upflow)
+        self._check = _Check(found, frame, 0.5 * upflow)
         self._pattern, self._pattern_index = legs, 0
         self._probe = None
         return False
