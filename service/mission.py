@@ -143,8 +143,8 @@ class _Check:
             return False
         if not obs.detected:
             return True
-        dx, dy = obs.x - self.found.x, obs.y - self.found.y
-        return -(dx * self.frame.ux + dy * self.frame.uy) < self.cancel_upflow_m
+        # how far upflow of the centre the odour was
+        return self.frame.along(self.found.x - obs.x, self.found.y - obs.y) < self.cancel_upflow_m
 
 
 class Mission:
