@@ -10,7 +10,7 @@ from service.grid import Grid
 from service.mapping.belief import FloatArray
 from service.mapping.hmm import HmmMapper
 from service.mapping.mapper import SourceMapper
-from service.mission import Mission, MissionState, PlumeFound, PlumeLost, SourceDeclared
+from service.mission import Mission, MissionOutput, MissionState, PlumeFound, PlumeLost, SourceDeclared
 from service.observation import Observation
 from service.planning import PLANNERS
 from service.planning.base import VehicleState, Waypoint
@@ -466,29 +466,42 @@ def test_a_cast_turning_point_in_a_blocked_cell_does_not_stall_the_cast() -> Non
     assert len(set(positions[-10:])) > 1  # still moving
 
 
-def check_mission(mapper: SourceMapper) -> Mission:
-    return mission_with(
-        mapper, rules=[DeclarationRule.MASS], probability=0.8, check_width_m=6.0, check_upflow_m=3.0
-    )
-
-
-def test_the_upflow_check_crosses_the_flow_upflow_of_the_estimate_before_declaring() -> None:
+def start_check() -> tuple[ScriptedMapper, Mission, Vehicle, MissionOutput]:
+    """A map sure of SOURCE, a mission with a 6 m check 3 m upflow, and the first tick: odour at
+    the estimate's centre, where the vehicle is (the rule fires there)."""
     mapper = ScriptedMapper(AREA)
     mapper.peak_at(SOURCE, 0.9)
-    mission = check_mission(mapper)
+    mission = mission_with(
+        mapper, rules=[DeclarationRule.MASS], probability=0.8, check_width_m=6.0, check_upflow_m=3.0
+    )
     sx, sy = AREA.centre(SOURCE)
     vehicle = Vehicle(sx, sy)
     out = mission.step(Observation(0.0, sx, sy, 1.0, 0.0, True), vehicle.state)
-    assert out.state is MissionState.TRACE  # the rule fires, but the check comes first
-    assert out.waypoints is not None
+    return mapper, mission, vehicle, out
+
+
+def fly_dry_until_declared(
+    mission: Mission, vehicle: Vehicle, out: MissionOutput, times: range
+) -> tuple[MissionOutput, list[tuple[float, float]]]:
+    """Fly the waypoints one per tick with no odour until a declaration (or ``times`` run out);
+    returns the last output and the points visited."""
     visited = []
-    for t in range(1, 10):
+    for t in times:
         vehicle.follow(out.waypoints)
         vehicle.move()
         visited.append((vehicle.x, vehicle.y))
         out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, False), vehicle.state)
         if out.state is MissionState.DECLARED:
             break
+    return out, visited
+
+
+def test_the_upflow_check_crosses_the_flow_upflow_of_the_estimate_before_declaring() -> None:
+    _, mission, vehicle, out = start_check()
+    sx, sy = AREA.centre(SOURCE)
+    assert out.state is MissionState.TRACE  # the rule fires, but the check comes first
+    assert out.waypoints is not None
+    out, visited = fly_dry_until_declared(mission, vehicle, out, range(1, 10))
     assert out.state is MissionState.DECLARED
     # flow East: 3 m West of the centre, 6 m to one side, then the other; declared there
     assert visited == [(sx - 3.0, sy + 6.0), (sx - 3.0, sy - 6.0), (sx - 3.0, sy - 6.0)]
@@ -498,12 +511,8 @@ def test_the_upflow_check_crosses_the_flow_upflow_of_the_estimate_before_declari
 
 
 def test_odour_upflow_of_the_estimate_calls_the_check_off() -> None:
-    mapper = ScriptedMapper(AREA)
-    mapper.peak_at(SOURCE, 0.9)
-    mission = check_mission(mapper)
+    _, mission, vehicle, out = start_check()
     sx, sy = AREA.centre(SOURCE)
-    vehicle = Vehicle(sx, sy)
-    out = mission.step(Observation(0.0, sx, sy, 1.0, 0.0, True), vehicle.state)
     vehicle.follow(out.waypoints)
     vehicle.move()  # on the check's first turning point, 3 m upflow
     assert (vehicle.x, vehicle.y) == (sx - 3.0, sy + 6.0)
@@ -512,25 +521,14 @@ def test_odour_upflow_of_the_estimate_calls_the_check_off() -> None:
     # move), so a new check starts from here, and it must be flown whole before a declaration
     assert out.state is MissionState.TRACE
     assert out.events == ()
-    visited = []
-    for t in range(2, 12):
-        vehicle.follow(out.waypoints)
-        vehicle.move()
-        visited.append((vehicle.x, vehicle.y))
-        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, False), vehicle.state)
-        if out.state is MissionState.DECLARED:
-            break
+    out, visited = fly_dry_until_declared(mission, vehicle, out, range(2, 12))
     assert out.state is MissionState.DECLARED
     assert visited[-2:] == [(sx - 3.0, sy - 6.0)] * 2  # the far side of the new check, then declared
 
 
 def test_odour_at_the_estimate_does_not_call_the_check_off() -> None:
-    mapper = ScriptedMapper(AREA)
-    mapper.peak_at(SOURCE, 0.9)
-    mission = check_mission(mapper)
+    _, mission, vehicle, out = start_check()
     sx, sy = AREA.centre(SOURCE)
-    vehicle = Vehicle(sx, sy)
-    out = mission.step(Observation(0.0, sx, sy, 1.0, 0.0, True), vehicle.state)
     first_leg = out.waypoints
     # odour 1 m downflow of the centre is what a source there gives: the check goes on
     out = mission.step(Observation(1.0, sx + 1.0, sy, 1.0, 0.0, True), vehicle.state)
@@ -539,12 +537,8 @@ def test_odour_at_the_estimate_does_not_call_the_check_off() -> None:
 
 
 def test_a_new_estimate_calls_the_check_off() -> None:
-    mapper = ScriptedMapper(AREA)
-    mapper.peak_at(SOURCE, 0.9)
-    mission = check_mission(mapper)
+    mapper, mission, vehicle, out = start_check()
     sx, sy = AREA.centre(SOURCE)
-    vehicle = Vehicle(sx, sy)
-    out = mission.step(Observation(0.0, sx, sy, 1.0, 0.0, True), vehicle.state)
     vehicle.follow(out.waypoints)
     vehicle.move()
     other = AREA.cell_of(sx - 20.0, sy)
