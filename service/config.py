@@ -137,6 +137,8 @@ class PlanningConfig(_Section):
     zigzag_spacing_m: float = Field(default=10.0, gt=0)
     zigzag_diagonal_start: bool = False
     """The first zigzag leg advances a spacing along the flow instead of crossing at the start's line."""
+    zigzag_downflow_near_edge: bool = False
+    """A start less than one zigzag spacing from the upflow edge sweeps downflow first."""
     cast_width_m: float = Field(default=10.0, gt=0)
     cast_legs: int = Field(default=4, ge=0, le=100)
     lost_after_s: float = Field(default=20.0, gt=0)

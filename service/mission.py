@@ -5,7 +5,9 @@ tracing, and source declaration". The states:
 
 - ``FIND`` (published as ``search``): no detection yet; a zigzag sweep across the flow
   (``planning.zigzag``), sweeping back the other way when it reaches the edge of the area, laid
-  out anew when the mean flow over the mapper's history turns by more than 45 degrees.
+  out anew when the mean flow over the mapper's history turns by more than 45 degrees. It goes
+  upflow first, or with ``zigzag_downflow_near_edge`` downflow from a start less than a spacing
+  from the upflow edge.
 - ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate.
 - ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
   last detection (``planning.cast``), then the planner again. A detection returns to ``TRACE``.
@@ -46,7 +48,7 @@ from service.planning.crossflow import FlowFrame
 from service.planning.declaration import Declarer, mass_within
 from service.planning.reach import Reachability
 from service.planning.safety import clamped_cell, safe_plan, segment_clear
-from service.planning.zigzag import zigzag_vertices
+from service.planning.zigzag import sweeps_upflow_first, zigzag_vertices
 
 if TYPE_CHECKING:
     from service.config import Config
@@ -331,6 +333,9 @@ class Mission:
 
     def _find(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
         frame = self._frame or FlowFrame(1.0, 0.0)
+        if self._sweep_frame is None and self.planning.zigzag_downflow_near_edge:
+            v, spacing = ctx.vehicle, self.planning.zigzag_spacing_m
+            self._sweep_upflow = sweeps_upflow_first(self.grid, v.x, v.y, frame, spacing)
         if self._sweep_frame is None or frame.angle_to(self._sweep_frame) > SWEEP_REDRAW_RAD:
             self._lay_sweep(ctx, frame)
         wanted = self._follow_pattern(ctx)

@@ -22,6 +22,19 @@ if TYPE_CHECKING:
     from service.grid import Grid
 
 
+def sweeps_upflow_first(grid: Grid, x: float, y: float, frame: FlowFrame, spacing_m: float) -> bool:
+    """Whether a sweep from (x, y) should go upflow first,: not
+    when the start is less than ``spacing_m`` from the upflow edge of the area.
+
+    From there the upflow sweep is a single leg to the edge, and nearly all of the area where
+    the source could be, the whole area between the start and the downflow edge, lies behind
+    the vehicle; it would be swept only after the vehicle has turned at the edge, while the
+    downflow sweep reaches it from its first leg on.
+    """
+    lo, _ = along_range(grid, frame)
+    return frame.along(x, y) - lo >= spacing_m
+
+
 def zigzag_vertices(
     grid: Grid,
     x: float,

@@ -424,6 +424,25 @@ def test_the_sweep_turns_with_the_mean_flow() -> None:
     assert min(abs(last[-1].x - e) for e in x_edges) < 1e-9  # legs run East-West
 
 
+def test_a_start_near_the_upflow_edge_sweeps_downflow_first() -> None:
+    def first_leg(start_x: float, near_edge: bool) -> Waypoint:
+        planning = PlanningConfig(
+            zigzag_spacing_m=30.0, zigzag_diagonal_start=True, zigzag_downflow_near_edge=near_edge
+        )
+        mission = Mission(AREA, ScriptedMapper(AREA), planning, NEVER)
+        v = VehicleState(start_x, 10.0)
+        out = mission.step(Observation(0.0, v.x, v.y, 1.0, 0.0, False), v)  # flow East
+        assert out.waypoints is not None
+        return out.waypoints[0]
+
+    # 15 m from the upflow (West) edge: a spacing downflow with the rule, to the edge without it
+    assert first_leg(17.5, True).x == pytest.approx(47.5)
+    assert first_leg(17.5, False).x == pytest.approx(AREA.x_centres[0])
+    # a spacing or more from the edge, the sweep goes upflow either way
+    assert first_leg(47.5, True) == first_leg(47.5, False)
+    assert first_leg(47.5, True).x == pytest.approx(17.5)
+
+
 def test_probes_beyond_an_obstacle_that_blocks_every_upflow_neighbour() -> None:
     # the estimate is the vehicle's own cell, against the downflow face of a wall: the mission
     # flies round the wall to the first free cell upflow instead of holding at the face

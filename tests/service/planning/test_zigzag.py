@@ -7,7 +7,7 @@ import pytest
 from service.grid import Grid
 from service.planning.cast import cast_vertices
 from service.planning.crossflow import FlowFrame
-from service.planning.zigzag import zigzag_vertices
+from service.planning.zigzag import sweeps_upflow_first, zigzag_vertices
 
 PAPER = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25)
 
@@ -158,3 +158,18 @@ def test_a_diagonal_start_advances_from_the_first_leg() -> None:
     # a start already on the upflow edge has no line to advance to: the leg across is kept
     edge = zigzag_vertices(PAPER, PAPER.x_centres[0], 10.0, frame, 10.0, diagonal_start=True)
     assert edge == zigzag_vertices(PAPER, PAPER.x_centres[0], 10.0, frame, 10.0)
+
+
+def test_a_start_near_the_upflow_edge_sweeps_downflow_first() -> None:
+    east = FlowFrame.from_flow(1.0, 0.0)  # the upflow edge is the West one; centres from x = 1.25
+    edge = PAPER.x_centres[0]
+    assert not sweeps_upflow_first(PAPER, edge, 10.0, east, 30.0)
+    assert not sweeps_upflow_first(PAPER, edge + 29.9, -40.0, east, 30.0)
+    assert sweeps_upflow_first(PAPER, edge + 30.0, -40.0, east, 30.0)
+    assert sweeps_upflow_first(PAPER, 98.75, 0.0, east, 30.0)
+    # the same start, the flow reversed: now it is far from the upflow (East) edge
+    assert sweeps_upflow_first(PAPER, edge, 10.0, FlowFrame.from_flow(-1.0, 0.0), 30.0)
+    # a flow North: the upflow edge is the South one
+    north = FlowFrame.from_flow(0.0, 2.0)
+    assert not sweeps_upflow_first(PAPER, 50.0, -40.0, north, 10.0)
+    assert sweeps_upflow_first(PAPER, 50.0, -30.0, north, 10.0)
