@@ -141,6 +141,9 @@ class PlanningConfig(_Section):
     """A start less than one zigzag spacing from the upflow edge sweeps downflow first."""
     cast_width_m: float = Field(default=10.0, gt=0)
     cast_legs: int = Field(default=4, ge=0, le=100)
+    lost_trace_mass: float = Field(default=0.0, ge=0, le=1)
+    """Plume lost with this share of the map within ``declaration.radius_m`` of the estimate: go
+    on tracing toward the estimate instead of casting (0: always cast)."""
     lost_after_s: float = Field(default=20.0, gt=0)
     surge_step_m: float = Field(default=5.0, gt=0)
 

@@ -11,6 +11,8 @@ tracing, and source declaration". The states:
 - ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate.
 - ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
   last detection (``planning.cast``), then the planner again. A detection returns to ``TRACE``.
+  With ``lost_trace_mass`` > 0, while the estimate holds that share of the map the vehicle goes
+  on tracing instead of casting.
 - ``DECLARED``: a declaration rule fired (``planning.declaration``); the vehicle holds. Rules are
   only judged after the first detection: before it a flat map's argmax never moves. With
   ``declaration.check_width_m`` > 0 a rule that fires first sends the vehicle across the flow
@@ -428,10 +430,21 @@ class Mission:
             distance_m += step_m
 
     def _lost(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
-        if self._check is not None:
+        if self._check is not None or self._map_knows_the_plume():
             return self._trace(ctx)
         wanted = self._follow_pattern(ctx)
         return wanted if wanted is not None else self._trace(ctx)
+
+    def _map_knows_the_plume(self) -> bool:
+        """Whether the estimate holds ``lost_trace_mass`` of the map (within the declaration
+        radius). The cast is for a map that does not know where the plume went; one that does
+        has its estimate near the source, where a cast through the last detection, often just
+        upflow of the source, crosses the flow where the plume is not."""
+        share = self.planning.lost_trace_mass
+        if share <= 0.0:
+            return False
+        cell = self._estimated_cell()
+        return mass_within(self.grid, self.mapper.likelihood, cell, self._declaration.radius_m) >= share
 
     _BEHAVIOUR: ClassVar[dict[MissionState, Callable[[Mission, PlanContext], tuple[Waypoint, ...]]]] = {
         MissionState.FIND: _find,

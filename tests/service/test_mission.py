@@ -424,6 +424,30 @@ def test_the_sweep_turns_with_the_mean_flow() -> None:
     assert min(abs(last[-1].x - e) for e in x_edges) < 1e-9  # legs run East-West
 
 
+@pytest.mark.parametrize(
+    ("peak", "lost_trace_mass", "casts"), [(0.3, 0.0, True), (0.3, 0.2, False), (0.1, 0.2, True)]
+)
+def test_a_lost_plume_is_traced_on_while_the_estimate_holds_the_map(
+    peak: float, lost_trace_mass: float, casts: bool
+) -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, peak)  # 5 m cells, radius 3 m: the mass near the estimate is the peak's
+    planning = PlanningConfig(
+        lost_after_s=10.0, cast_width_m=10.0, cast_legs=2, lost_trace_mass=lost_trace_mass
+    )
+    mission = Mission(AREA, mapper, planning, NEVER)
+    v = VehicleState(90.0, -40.0)
+    traced = mission.step(Observation(5.0, v.x, v.y, 1.0, 0.0, True), v).waypoints
+    assert traced is not None
+    assert (traced[-1].x, traced[-1].y) == AREA.centre(SOURCE)
+    out = mission.step(Observation(15.0, v.x, v.y, 1.0, 0.0, False), v)
+    assert out.state is MissionState.LOST
+    if casts:  # across the flow through the last detection
+        assert out.waypoints == (Waypoint(90.0, -30.0),)
+    else:  # on toward the estimate: the same waypoints, so none are sent again
+        assert out.waypoints is None
+
+
 def test_a_start_near_the_upflow_edge_sweeps_downflow_first() -> None:
     def first_leg(start_x: float, near_edge: bool) -> Waypoint:
         planning = PlanningConfig(
