@@ -143,7 +143,7 @@ class PlanningConfig(_Section):
     cast_legs: int = Field(default=4, ge=0, le=100)
     lost_trace_mass: float = Field(default=0.0, ge=0, le=1)
     """Plume lost with this share of the map within ``declaration.radius_m`` of the estimate: go
-    on tracing toward the estimate instead of casting (0: always cast)."""
+    on tracing toward the estimate instead of casting (0: always cast; surge-cast always casts)."""
     lost_after_s: float = Field(default=20.0, gt=0)
     surge_step_m: float = Field(default=5.0, gt=0)
 

@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from service.config import DeclarationConfig, DeclarationRule, PlanningConfig
+from service.config import DeclarationConfig, DeclarationRule, PlanningConfig, PlanningMethod
 from service.errors import NoPathError
 from service.planning import make_planner
 from service.planning.astar import AStarPlanner
@@ -441,8 +441,8 @@ class Mission:
         has its estimate near the source, where a cast through the last detection, often just
         upflow of the source, crosses the flow where the plume is not."""
         share = self.planning.lost_trace_mass
-        if share <= 0.0:
-            return False
+        if share <= 0.0 or self.planner.name == PlanningMethod.SURGE_CAST:
+            return False  # the map-free baseline casts whatever the map says
         cell = self._estimated_cell()
         return mass_within(self.grid, self.mapper.likelihood, cell, self._declaration.radius_m) >= share
 

@@ -425,26 +425,37 @@ def test_the_sweep_turns_with_the_mean_flow() -> None:
 
 
 @pytest.mark.parametrize(
-    ("peak", "lost_trace_mass", "casts"), [(0.3, 0.0, True), (0.3, 0.2, False), (0.1, 0.2, True)]
+    ("peak", "lost_trace_mass", "method", "casts"),
+    [
+        (0.3, 0.0, "astar", True),
+        (0.3, 0.2, "astar", False),
+        (0.1, 0.2, "astar", True),
+        (0.3, 0.2, "surge-cast", True),  # the map-free baseline casts whatever the map says
+    ],
 )
 def test_a_lost_plume_is_traced_on_while_the_estimate_holds_the_map(
-    peak: float, lost_trace_mass: float, casts: bool
+    peak: float, lost_trace_mass: float, method: str, casts: bool
 ) -> None:
     mapper = ScriptedMapper(AREA)
     mapper.peak_at(SOURCE, peak)  # 5 m cells, radius 3 m: the mass near the estimate is the peak's
     planning = PlanningConfig(
-        lost_after_s=10.0, cast_width_m=10.0, cast_legs=2, lost_trace_mass=lost_trace_mass
+        method=PlanningMethod(method),
+        lost_after_s=10.0,
+        cast_width_m=10.0,
+        cast_legs=2,
+        lost_trace_mass=lost_trace_mass,
     )
     mission = Mission(AREA, mapper, planning, NEVER)
     v = VehicleState(90.0, -40.0)
+    mission.step(Observation(4.0, v.x, v.y, 1.0, 0.0, False), v)  # a tick of flow for the surge
     traced = mission.step(Observation(5.0, v.x, v.y, 1.0, 0.0, True), v).waypoints
     assert traced is not None
-    assert (traced[-1].x, traced[-1].y) == AREA.centre(SOURCE)
     out = mission.step(Observation(15.0, v.x, v.y, 1.0, 0.0, False), v)
     assert out.state is MissionState.LOST
     if casts:  # across the flow through the last detection
         assert out.waypoints == (Waypoint(90.0, -30.0),)
     else:  # on toward the estimate: the same waypoints, so none are sent again
+        assert (traced[-1].x, traced[-1].y) == AREA.centre(SOURCE)
         assert out.waypoints is None
 
 
