@@ -6,8 +6,9 @@ the search area to the other, advancing ``spacing_m`` along the flow with every 
 that its track crosses every cross-flow position of the swept band at least once per
 ``spacing_m`` of along-flow distance: a plume narrower than the area but longer than
 ``spacing_m`` cannot slip between two legs. The sweep advances upflow by default (a plume lies
-downflow of its source, so moving upflow keeps the source ahead); when it reaches the edge of
-the area the mission sweeps back the other way.
+downflow of its source, so moving upflow keeps the source ahead; ``sweeps_upflow_first`` makes
+the exception for a start near the upflow edge); when it reaches the edge of the area the
+mission sweeps back the other way.
 """
 
 from __future__ import annotations
@@ -23,8 +24,8 @@ if TYPE_CHECKING:
 
 
 def sweeps_upflow_first(grid: Grid, x: float, y: float, frame: FlowFrame, spacing_m: float) -> bool:
-    """Whether a sweep from (x, y) should go upflow first,: not
-    when the start is less than ``spacing_m`` from the upflow edge of the area.
+    """Whether a sweep from (x, y) should go upflow first: not when the start is less than
+    ``spacing_m`` from the upflow edge of the area.
 
     From there the upflow sweep is a single leg to the edge, and nearly all of the area where
     the source could be, the whole area between the start and the downflow edge, lies behind
