@@ -122,6 +122,8 @@ def _run_search(args: argparse.Namespace) -> int:
                 f"{summary.median_path_m:>8.0f}{summary.wrong_declarations:>7}{summary.undeclared:>6}",
                 flush=True,
             )
+            if summary.success_rate < 1.0:
+                print(f"  {summary.failure_line()}", flush=True)
     if args.report:
         from service.bench import report  # matplotlib is optional: only the report needs it
 

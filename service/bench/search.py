@@ -14,6 +14,11 @@ cell is within one cell (column and row) of the source's cell; a declaration far
 *wrong declaration* (and the mission then has failed: the vehicle holds). Times to declaration
 are summarised over all runs with a failed run counted as never declared, so the median and
 p90 are only finite when at least half / 90 % of the runs succeeded.
+
+Each failure is put in one class, so a configuration that misses its target says where its time
+went: the plume never smelled; smelled, but the vehicle never came within one cell of the
+source's cell; came there, but not declared (and whether the map's estimate was on the source at
+the end, i.e. the declaration rule was still waiting); or a wrong declaration.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ import os
 from collections.abc import Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -99,11 +105,41 @@ class MissionResult:
     path_m: float
     """Distance the vehicle travelled until the declaration or the stop."""
     first_detection_s: float | None
+    reached_s: float | None = None
+    """When the vehicle first stood within one cell of the source's cell; None if it never did."""
+    estimate_on_source: bool = False
+    """Whether the map's estimate at the end was within one cell of the source's cell."""
     trace: MissionTrace | None = field(default=None, compare=False)
 
     @property
     def wrong(self) -> bool:
         return self.declared and not self.correct
+
+    @property
+    def failure(self) -> FailureClass | None:
+        """Where a failed mission stopped short; None for a success."""
+        if self.correct:
+            return None
+        if self.declared:
+            return FailureClass.WRONG
+        if self.first_detection_s is None:
+            return FailureClass.NEVER_DETECTED
+        if self.reached_s is None:
+            return FailureClass.NOT_REACHED
+        return FailureClass.UNDECLARED_AT_SOURCE
+
+
+class FailureClass(StrEnum):
+    """The one class of a failed mission (JSON key of its count)."""
+
+    NEVER_DETECTED = "never_detected"
+    """No detection before the time limit."""
+    NOT_REACHED = "not_reached"
+    """Smelled the plume but never came within one cell of the source's cell."""
+    UNDECLARED_AT_SOURCE = "undeclared_at_source"
+    """Came within one cell of the source's cell and still declared nothing."""
+    WRONG = "wrong"
+    """Declared a cell more than one cell from the source's."""
 
 
 @dataclass(frozen=True)
@@ -147,6 +183,7 @@ def run_mission(
     path_m = 0.0
     step_count = 0
     first_detection: float | None = None
+    reached: float | None = None
     declaration: SourceDeclared | None = None
     track: list[TrackPoint] = []
     while world.time_s < max_time_s - 1e-9 and declaration is None:
@@ -170,6 +207,8 @@ def run_mission(
             world.target_m = (out.waypoints[0].x, out.waypoints[0].y) if out.waypoints else None
         if obs.detected and first_detection is None:
             first_detection = obs.time_s
+        if reached is None and grid.contains(v.x_m, v.y_m) and within_one_cell(grid, v.x_m, v.y_m, *source):
+            reached = obs.time_s
         for event in out.events:
             if isinstance(event, SourceDeclared):
                 declaration = event
@@ -183,20 +222,24 @@ def run_mission(
     if record:
         puffs = world.plume.puffs()
         trace = MissionTrace(tuple(track), np.array(mapper.likelihood), np.array(puffs[:, :2]))
+    estimate = mapper.estimate()
+    on_source = within_one_cell(grid, estimate.x, estimate.y, *source)
     if declaration is None:
         return MissionResult(
-            seed,
-            source[0],
-            source[1],
-            False,
-            False,
-            world.time_s,
-            None,
-            None,
-            None,
-            path_m,
-            first_detection,
-            trace,
+            seed=seed,
+            source_x=source[0],
+            source_y=source[1],
+            declared=False,
+            correct=False,
+            time_s=world.time_s,
+            declared_x=None,
+            declared_y=None,
+            error_m=None,
+            path_m=path_m,
+            first_detection_s=first_detection,
+            reached_s=reached,
+            estimate_on_source=on_source,
+            trace=trace,
         )
     return MissionResult(
         seed=seed,
@@ -210,6 +253,8 @@ def run_mission(
         error_m=math.hypot(declaration.x - source[0], declaration.y - source[1]),
         path_m=path_m,
         first_detection_s=first_detection,
+        reached_s=reached,
+        estimate_on_source=on_source,
         trace=trace,
     )
 
@@ -236,13 +281,40 @@ class SearchSummary:
     wrong_declarations: int
     undeclared: int
     max_time_s: float
+    failures: dict[FailureClass, int] = field(default_factory=dict)
+    """Failed runs per class (every class present, zeros included)."""
+    undeclared_estimate_on_source: int = 0
+    """Of the ``undeclared_at_source`` failures, those whose estimate was on the source at the end."""
+    median_first_detection_s: float | None = None
+    """Median time of the first detection, runs without one counted as never."""
+    reached_rate: float = 0.0
+    """Share of runs in which the vehicle came within one cell of the source's cell."""
 
     def as_row(self) -> dict[str, Any]:
         """The JSON object of ``oslim bench search --json`` (keys ``JSON_KEYS`` first)."""
         row: dict[str, Any] = {key: getattr(self, key) for key in JSON_KEYS}
         row["undeclared"] = self.undeclared
         row["max_time_s"] = self.max_time_s
+        row["failures"] = {str(kind): self.failures.get(kind, 0) for kind in FailureClass}
+        row["undeclared_estimate_on_source"] = self.undeclared_estimate_on_source
+        row["median_first_detection_s"] = self.median_first_detection_s
+        row["reached_rate"] = self.reached_rate
         return row
+
+    def failure_line(self) -> str:
+        """The failures by class, in words (the text output's second line per configuration)."""
+        n = self.failures
+        failed = sum(n.values())
+        first = self.median_first_detection_s
+        return (
+            f"{failed} failed: {n.get(FailureClass.NEVER_DETECTED, 0)} never smelled the plume, "
+            f"{n.get(FailureClass.NOT_REACHED, 0)} smelled it but never came within a cell of the source, "
+            f"{n.get(FailureClass.UNDECLARED_AT_SOURCE, 0)} came there but declared nothing "
+            f"({self.undeclared_estimate_on_source} with the estimate on the source at the end), "
+            f"{n.get(FailureClass.WRONG, 0)} wrong; first detection median "
+            f"{'never' if first is None else f'{first:.0f} s'}, "
+            f"within a cell of the source in {self.reached_rate:.1%} of runs"
+        )
 
 
 def _quantile_or_none(times: Sequence[float], q: float) -> float | None:
@@ -269,6 +341,14 @@ def summarise(
         wrong_declarations=sum(r.wrong for r in results),
         undeclared=sum(not r.declared for r in results),
         max_time_s=max_time_s,
+        failures={kind: sum(r.failure is kind for r in results) for kind in FailureClass},
+        undeclared_estimate_on_source=sum(
+            r.failure is FailureClass.UNDECLARED_AT_SOURCE and r.estimate_on_source for r in results
+        ),
+        median_first_detection_s=_quantile_or_none(
+            [math.inf if r.first_detection_s is None else r.first_detection_s for r in results], 0.5
+        ),
+        reached_rate=sum(r.reached_s is not None for r in results) / len(results),
     )
 
 

@@ -17,12 +17,21 @@ GRID = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25)  # 2.5 x 4 m cells
 
 
 def result(
-    seed: int, *, declared: bool, correct: bool, time_s: float, path_m: float = 100.0
+    seed: int,
+    *,
+    declared: bool,
+    correct: bool,
+    time_s: float,
+    path_m: float = 100.0,
+    first_detection_s: float | None = None,
+    reached_s: float | None = None,
+    estimate_on_source: bool = False,
 ) -> MissionResult:
     x = 0.0 if declared else None
     return MissionResult(
-        seed, 0.0, 0.0, declared, correct, time_s, x, x, 0.0 if declared else None, path_m, None
-    )
+        seed, 0.0, 0.0, declared, correct, time_s, x, x, 0.0 if declared else None, path_m,
+        first_detection_s, reached_s, estimate_on_source,
+    )  # fmt: skip
 
 
 def test_within_one_cell_is_the_cell_and_its_eight_neighbours() -> None:
@@ -49,6 +58,51 @@ def test_summary_counts_failures_as_never() -> None:
     assert s.median_path_m == pytest.approx(210.0)
 
 
+def test_each_failure_has_one_class_and_the_summary_counts_them() -> None:
+    runs = [
+        result(0, declared=True, correct=True, time_s=100.0, first_detection_s=40.0, reached_s=90.0),
+        result(1, declared=True, correct=False, time_s=80.0, first_detection_s=30.0, reached_s=60.0),
+        result(2, declared=False, correct=False, time_s=300.0),
+        result(3, declared=False, correct=False, time_s=300.0, first_detection_s=50.0),
+        result(4, declared=False, correct=False, time_s=300.0, first_detection_s=70.0, reached_s=200.0),
+        result(
+            5,
+            declared=False,
+            correct=False,
+            time_s=300.0,
+            first_detection_s=20.0,
+            reached_s=100.0,
+            estimate_on_source=True,
+        ),
+    ]
+    assert [r.failure for r in runs] == [
+        None,
+        search.FailureClass.WRONG,
+        search.FailureClass.NEVER_DETECTED,
+        search.FailureClass.NOT_REACHED,
+        search.FailureClass.UNDECLARED_AT_SOURCE,
+        search.FailureClass.UNDECLARED_AT_SOURCE,
+    ]
+    s = summarise("x", "pomdp", "astar", runs, 300.0)
+    assert s.failures == {
+        search.FailureClass.NEVER_DETECTED: 1,
+        search.FailureClass.NOT_REACHED: 1,
+        search.FailureClass.UNDECLARED_AT_SOURCE: 2,
+        search.FailureClass.WRONG: 1,
+    }
+    assert s.undeclared_estimate_on_source == 1
+    assert s.reached_rate == pytest.approx(4 / 6)
+    assert s.median_first_detection_s == 40.0  # 20, 30, 40, 50, 70, never: the lower median
+    line = s.failure_line()
+    assert line.startswith("5 failed: 1 never smelled the plume, 1 smelled it but never came")
+    assert "2 came there but declared nothing (1 with the estimate on the source at the end), 1 wrong" in line
+    row = s.as_row()
+    assert row["failures"] == {
+        "never_detected": 1, "not_reached": 1, "undeclared_at_source": 2, "wrong": 1
+    }  # fmt: skip
+    assert json.loads(json.dumps(row))["reached_rate"] == pytest.approx(4 / 6)
+
+
 def test_all_and_repeated_names() -> None:
     assert search.expand(["all"], ["a", "b"], "a") == ["a", "b"]
     assert search.expand(None, ["a", "b"], "b") == ["b"]
@@ -72,6 +126,13 @@ def test_a_seeded_mission_finds_the_source(scenario: str) -> None:
     assert 0.0 < r.path_m <= 2.0 * r.time_s + 1e-6
     assert r.trace is not None
     assert r.trace.track[-1].time_s == r.time_s
+    # a correct declaration leaves the estimate on the source; the track says when it got there
+    assert r.estimate_on_source
+    assert r.reached_s is not None
+    first_near = next(
+        p.time_s for p in r.trace.track if within_one_cell(configured.grid, p.x, p.y, r.source_x, r.source_y)
+    )
+    assert r.reached_s == first_near
     # the same seed gives the same mission
     again = run_mission(configured, 0)
     assert (again.time_s, again.declared_x, again.path_m) == (r.time_s, r.declared_x, r.path_m)
@@ -96,6 +157,19 @@ def test_command_prints_one_json_object_per_configuration(capsys: pytest.Capture
         assert list(row)[: len(search.JSON_KEYS)] == list(search.JSON_KEYS)
         assert row["runs"] == 2
         assert 0.0 <= row["success_rate"] <= 1.0
+        assert sum(row["failures"].values()) == round(2 * (1.0 - row["success_rate"]))
+
+
+def test_command_text_says_where_the_failures_stopped(capsys: pytest.CaptureFixture[str]) -> None:
+    # 20 s is too short for any wang mission: both runs fail, and the line classes them
+    code = main(
+        ["bench", "search", "--scenario", "wang-laminar", "--mapper", "pomdp", "--planner", "astar",
+         "--runs", "2", "--jobs", "1", "--max-time", "20"]
+    )  # fmt: skip
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "  2 failed: " in out
+    assert " 0 wrong; first detection median " in out
 
 
 @pytest.mark.slow
