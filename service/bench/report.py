@@ -89,6 +89,10 @@ def markdown(
             f"| {_cell(s.p90_time_s, '.0f')} | {s.median_path_m:.0f} | {s.wrong_declarations} "
             f"| {s.undeclared} | {'' if paper_s is None else f'{paper_s:.0f}'} |"
         )
+    failed = [s for s in sorted(summaries, key=rank, reverse=True) if s.success_rate < 1.0]
+    if failed:
+        lines += ["", "Where the failed missions stopped:", ""]
+        lines += [f"- {s.mapper} + {s.planner}: {s.failure_line()}" for s in failed]
     return "\n".join(lines) + "\n"
 
 

@@ -194,3 +194,15 @@ def test_report_sets_the_papers_figures_beside_ours() -> None:
     assert "| 135 |" in text
     assert "declaration.probability=0.9" in text
     assert "typically less than 300 s" in markdown("farrell2003", [s], [], 300.0)
+    assert "Where the failed missions stopped" not in text  # every run succeeded
+
+
+def test_report_says_where_the_failed_missions_stopped() -> None:
+    from service.bench.report import markdown
+
+    runs = [
+        result(0, declared=True, correct=True, time_s=99.0, first_detection_s=30.0, reached_s=80.0),
+        result(1, declared=False, correct=False, time_s=300.0, first_detection_s=60.0),
+    ]
+    text = markdown("farrell2003", [summarise("farrell2003", "pomdp", "astar", runs, 300.0)], [], 300.0)
+    assert "- pomdp + astar: 1 failed: 0 never smelled the plume, 1 smelled it but never came" in text
