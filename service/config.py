@@ -145,6 +145,9 @@ class PlanningConfig(_Section):
     """Plume lost with this share of the map within ``declaration.radius_m`` of the estimate: go
     on tracing toward the estimate instead of casting (0: always cast; surge-cast always casts)."""
     lost_after_s: float = Field(default=20.0, gt=0)
+    lone_contact_hits: int = Field(default=0, ge=0, le=1000)
+    """A contact the sweep met with at most this many detections, then lost for ``lost_after_s``,
+    goes back to the sweep where it stopped instead of casting (0: always cast)."""
     surge_step_m: float = Field(default=5.0, gt=0)
 
 

@@ -11,6 +11,9 @@ tracing, and source declaration". The states:
 - ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate.
 - ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
   last detection (``planning.cast``), then the planner again. A detection returns to ``TRACE``.
+  With ``lone_contact_hits`` > 0, a contact the sweep met with at most that many detections
+  goes back to ``FIND`` instead, on along the sweep from where it stopped: a false alarm (the
+  detector's, or a stray puff) is not worth a cast, and the sweep crosses the flow again anyway.
   With ``lost_trace_mass`` > 0, while the estimate holds that share of the map the vehicle goes
   on tracing instead of casting.
 - ``DECLARED``: a declaration rule fired (``planning.declaration``); the vehicle holds. Rules are
@@ -81,7 +84,8 @@ class MissionState(StrEnum):
 
 @dataclass(frozen=True)
 class PlumeFound:
-    """A detection outside ``TRACE``: the first one (``first``) or one that ends ``LOST``."""
+    """A detection outside ``TRACE``: the mission's first (``first``), one that ends ``LOST``, or
+    one met by a sweep resumed after a lone detection (``planning.lone_contact_hits``)."""
 
     time_s: float
     x: float
@@ -185,6 +189,8 @@ class Mission:
         self._emitted: tuple[Waypoint, ...] | None = None
         self._hold: Waypoint | None = None
         self._probe: int | None = None  # a probe beyond an obstacle, flown until reached
+        self._paused_sweep: tuple[tuple[Waypoint, ...], int] | None = None  # (pattern, index) at contact
+        self._contact_hits = 0  # detections since the sweep was paused
 
     @classmethod
     def from_config(cls, config: Config, grid: Grid, mapper: SourceMapper) -> Mission:
@@ -259,16 +265,27 @@ class Mission:
             self._end_check()
         if obs.detected:
             if self._state is not MissionState.TRACE:
-                events.append(PlumeFound(t, obs.x, obs.y, first=self._state is MissionState.FIND))
-                if self._state is MissionState.FIND:
+                first = self._state is MissionState.FIND and not self._declarer.armed
+                events.append(PlumeFound(t, obs.x, obs.y, first=first))
+                paused = (self._pattern, self._pattern_index) if self._state is MissionState.FIND else None
+                if first:
                     self._declarer.arm(t, self.mapper.likelihood)
                 self._enter(MissionState.TRACE)
+                self._paused_sweep, self._contact_hits = paused, 0
+            self._contact_hits += 1
             self._last_detection = (t, obs.x, obs.y)
         elif self._state is MissionState.TRACE and self._last_detection is not None:
             t_last, x_last, y_last = self._last_detection
             if t - t_last >= self.planning.lost_after_s and self._check is None:
                 events.append(PlumeLost(t, x_last, y_last, t_last))
-                self._enter(MissionState.LOST)
+                paused = self._paused_sweep
+                if paused is not None and self._contact_hits <= self.planning.lone_contact_hits:
+                    # a lone detection met by the sweep and not repeated: most likely a false
+                    # alarm; sweep on from where it stopped instead of casting around it
+                    self._enter(MissionState.FIND)
+                    self._pattern, self._pattern_index = paused
+                else:
+                    self._enter(MissionState.LOST)
         if self._declarer.armed:
             flow = None if self._frame is None else (self._frame.ux, self._frame.uy)
             found = self._declarer.update(t, self.mapper.likelihood, (obs.x, obs.y), flow)
@@ -324,6 +341,7 @@ class Mission:
     def _enter(self, state: MissionState) -> None:
         self._check = None
         self._state = state
+        self._paused_sweep = None
         self._pattern, self._pattern_index = (), 0
         self._probe = None
         if state is MissionState.LOST and self._last_detection is not None and self._frame is not None:

@@ -459,6 +459,41 @@ def test_a_lost_plume_is_traced_on_while_the_estimate_holds_the_map(
         assert out.waypoints is None
 
 
+@pytest.mark.parametrize(
+    ("lone_contact_hits", "hits", "sweeps_on"), [(0, 1, False), (1, 1, True), (1, 2, False)]
+)
+def test_a_lone_detection_from_the_sweep_resumes_the_sweep(
+    lone_contact_hits: int, hits: int, sweeps_on: bool
+) -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.05)
+    planning = PlanningConfig(
+        lost_after_s=10.0, cast_width_m=10.0, cast_legs=2, lone_contact_hits=lone_contact_hits
+    )
+    mission = Mission(AREA, mapper, planning, NEVER)
+    flow = (1.0, 0.0)
+    v = VehicleState(90.0, -40.0)
+    swept = mission.step(Observation(0.0, v.x, v.y, *flow, False), v).waypoints
+    assert swept is not None  # the first sweep leg, North across the flow
+    v = VehicleState(90.0, -20.0)  # part way along it
+    for k in range(hits):
+        out = mission.step(Observation(5.0 + k, v.x, v.y, *flow, True), v)
+        assert out.state is MissionState.TRACE
+    last = 5.0 + hits - 1
+    out = mission.step(Observation(last + 10.0, v.x, v.y, *flow, False), v)
+    assert PlumeLost(last + 10.0, v.x, v.y, last) in out.events
+    if sweeps_on:  # back to the sweep, on to the turning point it was flying to
+        assert out.state is MissionState.FIND
+        assert out.waypoints == swept
+        # a later contact is traced as before (and is not the mission's first)
+        out = mission.step(Observation(30.0, v.x, v.y, *flow, True), v)
+        assert out.state is MissionState.TRACE
+        assert out.events == (PlumeFound(30.0, v.x, v.y, first=False),)
+    else:  # a cast across the flow through the last detection
+        assert out.state is MissionState.LOST
+        assert out.waypoints == (Waypoint(90.0, -10.0),)
+
+
 def test_a_start_near_the_upflow_edge_sweeps_downflow_first() -> None:
     def first_leg(start_x: float, near_edge: bool) -> Waypoint:
         planning = PlanningConfig(
