@@ -146,8 +146,11 @@ class PlanningConfig(_Section):
     on tracing toward the estimate instead of casting (0: always cast; surge-cast always casts)."""
     lost_after_s: float = Field(default=20.0, gt=0)
     lone_contact_hits: int = Field(default=0, ge=0, le=1000)
-    """A contact the sweep met with at most this many detections, then lost for ``lost_after_s``,
-    goes back to the sweep where it stopped instead of casting (0: always cast)."""
+    """A contact the sweep met with at most this many detections, then lost for
+    ``lone_contact_lost_after_s``, goes back to the sweep where it stopped instead of casting
+    (0: always cast)."""
+    lone_contact_lost_after_s: float = Field(default=20.0, gt=0)
+    """How long a lone contact (``lone_contact_hits``) waits for another detection, s."""
     surge_step_m: float = Field(default=5.0, gt=0)
 
 

@@ -11,9 +11,10 @@ tracing, and source declaration". The states:
 - ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate.
 - ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
   last detection (``planning.cast``), then the planner again. A detection returns to ``TRACE``.
-  With ``lone_contact_hits`` > 0, a contact the sweep met with at most that many detections
-  goes back to ``FIND`` instead, on along the sweep from where it stopped: a false alarm (the
-  detector's, or a stray puff) is not worth a cast, and the sweep crosses the flow again anyway.
+  With ``lone_contact_hits`` > 0, a contact the sweep met with at most that many detections is
+  lost after ``lone_contact_lost_after_s`` instead, and goes back to ``FIND``, on along the sweep
+  from where it stopped: a false alarm (the detector's, or a stray puff) is not worth a cast,
+  and the sweep crosses the flow again anyway.
   With ``lost_trace_mass`` > 0, while the estimate holds that share of the map the vehicle goes
   on tracing instead of casting.
 - ``DECLARED``: a declaration rule fired (``planning.declaration``); the vehicle holds. Rules are
@@ -276,10 +277,12 @@ class Mission:
             self._last_detection = (t, obs.x, obs.y)
         elif self._state is MissionState.TRACE and self._last_detection is not None:
             t_last, x_last, y_last = self._last_detection
-            if t - t_last >= self.planning.lost_after_s and self._check is None:
+            paused = self._paused_sweep
+            lone = paused is not None and self._contact_hits <= self.planning.lone_contact_hits
+            wait = self.planning.lone_contact_lost_after_s if lone else self.planning.lost_after_s
+            if t - t_last >= wait and self._check is None:
                 events.append(PlumeLost(t, x_last, y_last, t_last))
-                paused = self._paused_sweep
-                if paused is not None and self._contact_hits <= self.planning.lone_contact_hits:
+                if paused is not None and lone:
                     # a lone detection met by the sweep and not repeated: most likely a false
                     # alarm; sweep on from where it stopped instead of casting around it
                     self._enter(MissionState.FIND)

@@ -468,7 +468,11 @@ def test_a_lone_detection_from_the_sweep_resumes_the_sweep(
     mapper = ScriptedMapper(AREA)
     mapper.peak_at(SOURCE, 0.05)
     planning = PlanningConfig(
-        lost_after_s=10.0, cast_width_m=10.0, cast_legs=2, lone_contact_hits=lone_contact_hits
+        lost_after_s=10.0,
+        cast_width_m=10.0,
+        cast_legs=2,
+        lone_contact_hits=lone_contact_hits,
+        lone_contact_lost_after_s=4.0,
     )
     mission = Mission(AREA, mapper, planning, NEVER)
     flow = (1.0, 0.0)
@@ -480,8 +484,10 @@ def test_a_lone_detection_from_the_sweep_resumes_the_sweep(
         out = mission.step(Observation(5.0 + k, v.x, v.y, *flow, True), v)
         assert out.state is MissionState.TRACE
     last = 5.0 + hits - 1
-    out = mission.step(Observation(last + 10.0, v.x, v.y, *flow, False), v)
-    assert PlumeLost(last + 10.0, v.x, v.y, last) in out.events
+    wait = 4.0 if sweeps_on else 10.0  # a lone contact waits lone_contact_lost_after_s
+    assert mission.step(Observation(last + wait - 0.5, v.x, v.y, *flow, False), v).state is MissionState.TRACE
+    out = mission.step(Observation(last + wait, v.x, v.y, *flow, False), v)
+    assert PlumeLost(last + wait, v.x, v.y, last) in out.events
     if sweeps_on:  # back to the sweep, on to the turning point it was flying to
         assert out.state is MissionState.FIND
         assert out.waypoints == swept
