@@ -37,6 +37,12 @@ def add_parser(subparsers: Any, name: str) -> None:
     s.add_argument(
         "--runs", type=int, default=20, help="missions per configuration, seeds 0..N-1 (default 20)"
     )
+    s.add_argument(
+        "--first-seed",
+        type=int,
+        default=0,
+        help="start the seeds here: K..K+N-1 (default 0; another set checks a tuned setting)",
+    )
     s.add_argument("--jobs", type=int, default=None, help="worker processes (default: the cores)")
     s.add_argument(
         "--max-time",
@@ -96,7 +102,8 @@ def _run_search(args: argparse.Namespace) -> int:
     planners = search.expand(args.planners, search.planner_names(), str(scenario.config.planning.method))
     if not args.json:
         print(
-            f"{scenario.name}: {args.runs} runs per configuration, limit {args.max_time:g} s; "
+            f"{scenario.name}: {args.runs} runs per configuration (seeds {args.first_seed}.."
+            f"{args.first_seed + args.runs - 1}), limit {args.max_time:g} s; "
             "times: failed runs count as never",
             flush=True,
         )
@@ -109,7 +116,7 @@ def _run_search(args: argparse.Namespace) -> int:
     results: dict[tuple[str, str], list[search.MissionResult]] = {}
     for summary, batch in search.run_configurations(
         args.scenario, mappers, planners, args.runs, jobs=args.jobs, max_time_s=args.max_time,
-        overrides=args.overrides,
+        overrides=args.overrides, first_seed=args.first_seed,
     ):  # fmt: skip
         summaries.append(summary)
         results[summary.mapper, summary.planner] = batch
@@ -136,6 +143,7 @@ def _run_search(args: argparse.Namespace) -> int:
             results=results[best.mapper, best.planner],
             overrides=args.overrides,
             max_time_s=args.max_time,
+            first_seed=args.first_seed,
         )
         if not args.json:
             print(f"report: {written}", flush=True)

@@ -61,18 +61,23 @@ def _cell(value: float | None, spec: str) -> str:
 
 
 def markdown(
-    scenario: str, summaries: Sequence[SearchSummary], overrides: Sequence[str], max_time_s: float
+    scenario: str,
+    summaries: Sequence[SearchSummary],
+    overrides: Sequence[str],
+    max_time_s: float,
+    first_seed: int = 0,
 ) -> str:
     """The report's text: our table, the papers' figures, how the figures were measured."""
     paper = PAPER_TIMES_S.get(scenario, {})
+    last_seed = first_seed + (summaries[0].runs if summaries else 0) - 1
     lines = [
         f"# Search benchmark: {scenario}",
         "",
         _paper_line(scenario),
         "",
-        f"Ours: seeds 0..N-1, in-process closed loop, limit {max_time_s:g} s per mission. Success: the"
-        " declared cell within one cell of the source's, no wrong declaration. Times count failed runs"
-        " as never (so a median is only finite with at least half the runs successful).",
+        f"Ours: seeds {first_seed}..{last_seed}, in-process closed loop, limit {max_time_s:g} s per mission."
+        " Success: the declared cell within one cell of the source's, no wrong declaration. Times count"
+        " failed runs as never (so a median is only finite with at least half the runs successful).",
     ]
     if overrides:
         lines += ["", "Overrides: " + ", ".join(f"`{o}`" for o in overrides)]
@@ -161,6 +166,7 @@ def write_report(
     results: Sequence[MissionResult] = (),
     overrides: Sequence[str] = (),
     max_time_s: float,
+    first_seed: int = 0,
 ) -> Path:
     """Write ``<scenario>.md`` and ``<scenario>-mission.png`` into ``directory``; returns the .md."""
     out = Path(directory)
@@ -170,7 +176,7 @@ def write_report(
     recorded = run_mission(configured, seed, max_time_s=max_time_s, record=True)
     picture = out / f"{configured.name}-mission.png"
     draw_mission(configured, recorded, picture)
-    text = markdown(scenario, summaries, overrides, max_time_s)
+    text = markdown(scenario, summaries, overrides, max_time_s, first_seed)
     text += (
         f"\nRepresentative mission ({best.mapper} + {best.planner}, seed {seed}): "
         f"![mission]({picture.name})\n"

@@ -384,18 +384,23 @@ def run_configurations(
     jobs: int | None = None,
     max_time_s: float = DEFAULT_MAX_TIME_S,
     overrides: Sequence[str] = (),
+    first_seed: int = 0,
 ) -> Iterable[tuple[SearchSummary, list[MissionResult]]]:
-    """Every mapper x planner configuration over seeds 0..runs-1, in a pool of ``jobs`` processes
-    (default: the cores); yields each configuration's summary as soon as its runs are done."""
+    """Every mapper x planner configuration over seeds first_seed..first_seed+runs-1 (a second
+    set of seeds checks that a setting chosen on the first did not just fit those missions), in a
+    pool of ``jobs`` processes (default: the cores); yields each configuration's summary as soon
+    as its runs are done."""
     if runs < 1:
         raise ValueError("runs must be >= 1")
+    if first_seed < 0:
+        raise ValueError("first_seed must be >= 0")
     configure(scenario, mappers[0], planners[0], overrides)  # fail early on a bad name or key
     workers = jobs or os.cpu_count() or 1
     configs = [(m, p) for m in mappers for p in planners]
     specs = [
         MissionSpec(scenario, m, p, seed, max_time_s, tuple(overrides))
         for m, p in configs
-        for seed in range(runs)
+        for seed in range(first_seed, first_seed + runs)
     ]
     if workers == 1:
         results = map(run_spec, specs)

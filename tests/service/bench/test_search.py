@@ -103,6 +103,21 @@ def test_each_failure_has_one_class_and_the_summary_counts_them() -> None:
     assert json.loads(json.dumps(row))["reached_rate"] == pytest.approx(4 / 6)
 
 
+def test_a_later_first_seed_runs_other_missions() -> None:
+    ((first, runs_a),) = search.run_configurations(
+        "wang-laminar", ["pomdp"], ["astar"], 2, jobs=1, max_time_s=5.0
+    )
+    ((_, runs_b),) = search.run_configurations(
+        "wang-laminar", ["pomdp"], ["astar"], 2, jobs=1, max_time_s=5.0, first_seed=1
+    )
+    assert [r.seed for r in runs_a] == [0, 1]
+    assert [r.seed for r in runs_b] == [1, 2]
+    assert runs_b[0] == runs_a[1]  # seed 1 is the same mission whichever set it is in
+    assert first.runs == 2
+    with pytest.raises(ValueError, match="first_seed"):
+        list(search.run_configurations("wang-laminar", ["pomdp"], ["astar"], 1, first_seed=-1))
+
+
 def test_all_and_repeated_names() -> None:
     assert search.expand(["all"], ["a", "b"], "a") == ["a", "b"]
     assert search.expand(None, ["a", "b"], "b") == ["b"]
@@ -164,10 +179,11 @@ def test_command_text_says_where_the_failures_stopped(capsys: pytest.CaptureFixt
     # 20 s is too short for any wang mission: both runs fail, and the line classes them
     code = main(
         ["bench", "search", "--scenario", "wang-laminar", "--mapper", "pomdp", "--planner", "astar",
-         "--runs", "2", "--jobs", "1", "--max-time", "20"]
+         "--runs", "2", "--first-seed", "7", "--jobs", "1", "--max-time", "20"]
     )  # fmt: skip
     assert code == 0
     out = capsys.readouterr().out
+    assert "2 runs per configuration (seeds 7..8)" in out
     assert "  2 failed: " in out
     assert " 0 wrong; first detection median " in out
 
@@ -195,6 +211,8 @@ def test_report_sets_the_papers_figures_beside_ours() -> None:
     assert "declaration.probability=0.9" in text
     assert "typically less than 300 s" in markdown("farrell2003", [s], [], 300.0)
     assert "Where the failed missions stopped" not in text  # every run succeeded
+    assert "Ours: seeds 0..0," in text
+    assert "Ours: seeds 200..200," in markdown("wang-laminar", [s], [], 300.0, first_seed=200)
 
 
 def test_report_says_where_the_failed_missions_stopped() -> None:
