@@ -183,6 +183,12 @@ class DeclarationConfig(_Section):
     check_width_m: float = Field(default=0.0, ge=0)
     """Before naming a cell, cross the flow ``check_upflow_m`` upflow of its centre, this far to
     either side, m (0: off); odour found upflow there calls the declaration off."""
+    persist_s: float = Field(default=0.0, ge=0)
+    """No rule fires until odour has been detected within ``visit_radius_m`` of the estimate at
+    two times at least this far apart, s (0: off)."""
+    probe_to_pass: bool = False
+    """The probe upflow of the estimate is flown until the vehicle is ``upflow_pass_m`` upflow of
+    its centre, not only until it enters the cell upflow."""
     check_upflow_m: float = Field(default=3.0, gt=0)
     """How far upflow of the estimated cell's centre the check crosses the flow, m."""
 

@@ -23,7 +23,9 @@ tracing, and source declaration". The states:
   ``check_upflow_m`` upflow of the estimate (still ``TRACE``), and the source is declared when
   that pass is flown; odour found upflow of the estimate, or another estimate, calls it off. A
   plume that swung off the vehicle's line looks to the maps like the upflow end of a plume; the
-  check looks for it where it would be.
+  check looks for it where it would be. At the estimate the vehicle probes upflow (the cell
+  upflow, or with ``declaration.probe_to_pass`` a point just beyond the upflow pass), so that the
+  declaration's upflow pass is made.
 
 ``Mission.step`` is pure: its inputs are this tick's observation (whose ``time_s`` is the only
 clock) and the vehicle state; it updates the mapper it was given and returns the waypoints to fly
@@ -68,6 +70,10 @@ SWEEP_REDRAW_RAD = math.pi / 4.0
 """A zigzag is laid out anew when the flow has turned more than this since it was laid out."""
 
 
+PASS_PROBE_MARGIN_M = 0.25
+"""``probe_to_pass`` flies this far beyond the upflow pass, so that the pass is met, not grazed."""
+PASS_PROBE_REACHED_M = 0.3
+"""The ``probe_to_pass`` point counts as reached this close to it."""
 UPFLOW_PROBES: tuple[tuple[int, int], ...] = tuple(
     (d_row, d_col) for d_row in (-1, 0, 1) for d_col in (-1, 0, 1) if (d_row, d_col) != (0, 0)
 )
@@ -192,6 +198,7 @@ class Mission:
         self._probe: int | None = None  # a probe beyond an obstacle, flown until reached
         self._paused_sweep: tuple[tuple[Waypoint, ...], int] | None = None  # (pattern, index) at contact
         self._contact_hits = 0  # detections since the sweep was paused
+        self._pass_probe: tuple[int, Waypoint] | None = None  # (estimate, point) of probe_to_pass
 
     @classmethod
     def from_config(cls, config: Config, grid: Grid, mapper: SourceMapper) -> Mission:
@@ -291,7 +298,7 @@ class Mission:
                     self._enter(MissionState.LOST)
         if self._declarer.armed:
             flow = None if self._frame is None else (self._frame.ux, self._frame.uy)
-            found = self._declarer.update(t, self.mapper.likelihood, (obs.x, obs.y), flow)
+            found = self._declarer.update(t, self.mapper.likelihood, (obs.x, obs.y), flow, obs.detected)
             if self._check is not None and self._check.done:
                 # flown with no odour upflow: the rule fired at the estimate when the check began
                 lik = self.mapper.likelihood
@@ -394,7 +401,17 @@ class Mission:
             # would turn back at the first step off it, so the probe is flown until reached
             return self._route(self._router, replace(ctx, goal=self._probe))
         self._probe = None
+        if self._pass_probe is not None:
+            cell, target = self._pass_probe
+            there = math.hypot(ctx.vehicle.x - target.x, ctx.vehicle.y - target.y) < PASS_PROBE_REACHED_M
+            if cell == ctx.goal and not there and not self._declarer.passed_upflow:
+                return (target,)
+            self._pass_probe = None
         if self._reach.goal_for(ctx.cell, ctx.goal) == ctx.cell:
+            target = self._pass_probe_target(ctx)
+            if target is not None:
+                self._pass_probe = (ctx.goal, target)
+                return (target,)
             # at the estimate (or as near as it can be reached, beside an obstacle) and not yet
             # declared: staying put only repeats one observation (odour there is explained as well
             # by any source upflow), so probe the cell upflow: odour there rules the vehicle's cell
@@ -405,6 +422,23 @@ class Mission:
             if probe is not None:
                 return self._route(self._router, replace(ctx, goal=probe))
         return self._route(self.planner, ctx)
+
+    def _pass_probe_target(self, ctx: PlanContext) -> Waypoint | None:
+        """With ``probe_to_pass``: the point just beyond the upflow pass of the estimate, if the
+        pass is still to be made and the leg there is clear; else None (the cell probe)."""
+        pass_m = self._declaration.upflow_pass_m
+        if not self._declaration.probe_to_pass or pass_m <= 0.0 or self._frame is None:
+            return None
+        if self._declarer.passed_upflow:
+            return None
+        cx, cy = self.grid.centre(ctx.goal)
+        d = pass_m + PASS_PROBE_MARGIN_M
+        target = Waypoint(cx - d * self._frame.ux, cy - d * self._frame.uy)
+        if not self.grid.contains(target.x, target.y):
+            return None
+        if not segment_clear(self.grid, (ctx.vehicle.x, ctx.vehicle.y), (target.x, target.y)):
+            return None
+        return target
 
     def _upflow_neighbour(self, cell: int) -> int | None:
         """The free neighbour of ``cell`` most nearly upflow (against the mean flow), if any."""

@@ -36,6 +36,13 @@ upflow tells them apart: odour there moves the estimate on (and restarts the wai
 leaves it. The mission's trace behaviour probes the upflow neighbour whenever the vehicle is at
 the estimate, so the pass comes without a change of planner.
 
+With ``persist_s`` > 0 no rule fires until odour has been detected within ``visit_radius_m`` of
+the estimated cell's centre at two times at least ``persist_s`` apart. A source keeps releasing
+where it is, so odour comes back to it however the plume meanders; where a meandering plume has
+swung away, odour was there only while it passed. The guard does not depend on how the vehicle
+looks upflow, so the probe can be made to complete the upflow pass (``probe_to_pass``, in the
+mission) without the wrong declarations that easing the pass otherwise brings.
+
 The estimate is the cell of greatest likelihood (the mapper's ``estimate``); ties go to the
 lowest flat index, as ``numpy.argmax`` does.
 """
@@ -43,6 +50,7 @@ lowest flat index, as ``numpy.argmax`` does.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -94,6 +102,12 @@ class Declarer:
         self._since_s = 0.0
         self._firing_since_s: float | None = None  # since when a rule fires for self._cell
         self._passed_upflow = False  # the vehicle has been upflow_pass_m upflow of self._cell
+        self._odour: deque[tuple[float, float, float]] = deque()  # detections (t, x, y), persist_s
+
+    @property
+    def passed_upflow(self) -> bool:
+        """Whether the vehicle has made the upflow pass of the current estimate."""
+        return self._passed_upflow
 
     @property
     def armed(self) -> bool:
@@ -112,6 +126,7 @@ class Declarer:
         likelihood: FloatArray,
         vehicle_m: tuple[float, float] | None = None,
         flow: tuple[float, float] | None = None,
+        detected: bool = False,
     ) -> Declaration | None:
         """The declaration if an enabled rule fires at this tick, else None (always None unarmed).
         With ``vehicle_m`` (x, y), nothing fires while the vehicle is farther than
@@ -120,6 +135,8 @@ class Declarer:
         ``flow`` (the mean flow direction, any length); without both, never."""
         if self._cell is None:
             return None
+        if detected and vehicle_m is not None and self.config.persist_s > 0.0:
+            self._odour.append((time_s, *vehicle_m))
         cell = int(np.argmax(likelihood))
         if cell != self._cell:
             self._cell, self._since_s = cell, time_s
@@ -142,6 +159,8 @@ class Declarer:
             DeclarationRule.MASS: mass >= self.config.probability,
         }
         rules = tuple(dict.fromkeys(r for r in self.config.rules if fired[r]))
+        if rules and not self._odour_persists(cell):
+            rules = ()
         if not rules:
             self._firing_since_s = None
             return None
@@ -160,6 +179,18 @@ class Declarer:
             mass=mass,
             rules=rules,
         )
+
+    def _odour_persists(self, cell: int) -> bool:
+        """Whether odour was detected within ``visit_radius_m`` of ``cell``'s centre at two times at
+        least ``persist_s`` apart (always, with ``persist_s`` 0). A source keeps releasing where it
+        is; a plume that swung away leaves odour at a place only while it passes."""
+        persist = self.config.persist_s
+        if persist <= 0.0:
+            return True
+        cx, cy = self.grid.centre(cell)
+        r = self.config.visit_radius_m
+        times = [t for t, x, y in self._odour if math.hypot(x - cx, y - cy) <= r]
+        return bool(times) and max(times) - min(times) >= persist - 1e-9
 
     def _is_upflow(
         self, cell: int, vehicle_m: tuple[float, float] | None, flow: tuple[float, float] | None

@@ -646,3 +646,31 @@ def test_a_new_estimate_calls_the_check_off() -> None:
         assert out.events == ()
     # on its way to the new estimate, not on the old check's legs
     assert vehicle.x < sx - 3.0
+
+
+@pytest.mark.parametrize("probe_to_pass", [False, True])
+def test_the_probe_upflow_can_fly_until_the_upflow_pass_is_made(probe_to_pass: bool) -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.5)
+    decl = DeclarationConfig(
+        rules=[DeclarationRule.STABLE], stable_s=1e9, upflow_pass_m=2.0, probe_to_pass=probe_to_pass
+    )
+    mission = Mission(AREA, mapper, PlanningConfig(), decl)
+    cx, cy = AREA.centre(SOURCE)  # (22.5, 2.5) on 5 m cells; flow East, so upflow is West
+    flow = (1.0, 0.0)
+    v = VehicleState(cx, cy)
+    out = mission.step(Observation(0.0, v.x, v.y, *flow, True), v)  # at the estimate, in odour
+    assert out.waypoints is not None
+    point = Waypoint(cx - 2.25, cy)  # just beyond the 2 m pass
+    if not probe_to_pass:  # the cell upflow: its centre, 5 m upflow
+        assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)
+        return
+    assert out.waypoints == (point,)
+    v = VehicleState(cx - 1.5, cy)  # on the way, still in the estimated cell: keep going
+    out = mission.step(Observation(1.0, v.x, v.y, *flow, False), v)
+    assert out.waypoints is None
+    assert out.state is MissionState.TRACE
+    v = VehicleState(cx - 2.25, cy)  # there: the pass is made, so the cell probe takes over
+    out = mission.step(Observation(2.0, v.x, v.y, *flow, False), v)
+    assert out.waypoints is not None
+    assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)

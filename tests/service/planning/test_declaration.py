@@ -144,3 +144,25 @@ def test_upflow_pass_is_off_by_default_and_for_the_hmm() -> None:
     config = DeclarationConfig(upflow_pass_m=2.0)
     assert config.for_mapper("hmm").upflow_pass_m == 0.0
     assert config.for_mapper("pomdp").upflow_pass_m == 2.0
+
+
+def test_persist_waits_for_odour_near_the_estimate_at_two_times_far_enough_apart() -> None:
+    config = DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0, persist_s=20.0)
+    d = Declarer(G, config)
+    pi = peaked(12, 0.6)  # centre (2.5, 2.5); visit radius 3 m
+    d.arm(0.0, pi)
+    assert d.update(1.0, pi, (2.5, 2.5), detected=True) is None  # odour once: no span yet
+    assert d.update(11.0, pi, (2.0, 2.5), detected=True) is None  # 10 s apart
+    assert d.update(15.0, pi, (2.5, 2.5)) is None  # no odour: the span is still 10 s
+    assert d.update(20.0, pi, (4.9, 4.9), detected=True) is None  # 3.4 m away: not near the estimate
+    found = d.update(21.0, pi, (3.0, 2.0), detected=True)  # near it, 20 s after the first
+    assert found is not None
+    assert found.cell == 12
+
+
+def test_persist_is_off_by_default() -> None:
+    assert DeclarationConfig().persist_s == 0.0
+    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0))
+    pi = peaked(12, 0.6)
+    d.arm(0.0, pi)
+    assert d.update(1.0, pi, (2.5, 2.5)) is not None  # no odour needed at all
