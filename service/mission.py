@@ -408,10 +408,10 @@ class Mission:
                 return (target,)
             self._pass_probe = None
         if self._reach.goal_for(ctx.cell, ctx.goal) == ctx.cell:
-            target = self._pass_probe_target(ctx)
-            if target is not None:
-                self._pass_probe = (ctx.goal, target)
-                return (target,)
+            point = self._pass_probe_target(ctx)
+            if point is not None:
+                self._pass_probe = (ctx.goal, point)
+                return (point,)
             # at the estimate (or as near as it can be reached, beside an obstacle) and not yet
             # declared: staying put only repeats one observation (odour there is explained as well
             # by any source upflow), so probe the cell upflow: odour there rules the vehicle's cell
