@@ -160,8 +160,10 @@ def test_persist_waits_for_odour_near_the_estimate_at_two_times_far_enough_apart
     assert found.cell == 12
 
 
-def test_persist_is_off_by_default() -> None:
+def test_persist_is_off_by_default_and_for_the_hmm() -> None:
     assert DeclarationConfig().persist_s == 0.0
+    assert DeclarationConfig(persist_s=20.0).for_mapper("hmm").persist_s == 0.0
+    assert DeclarationConfig(persist_s=20.0).for_mapper("pomdp").persist_s == 20.0
     d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0))
     pi = peaked(12, 0.6)
     d.arm(0.0, pi)
