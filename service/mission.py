@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from service.config import DeclarationConfig, DeclarationRule, PlanningConfig, PlanningMethod
+from service.config import DeclarationConfig, DeclarationRule, PlanningConfig
 from service.errors import NoPathError
 from service.planning import make_planner
 from service.planning.astar import AStarPlanner
@@ -496,7 +496,7 @@ class Mission:
         has its estimate near the source, where a cast through the last detection, often just
         upflow of the source, crosses the flow where the plume is not."""
         share = self.planning.lost_trace_mass
-        if share <= 0.0 or self.planner.name == PlanningMethod.SURGE_CAST:
+        if share <= 0.0 or not self.planner.steers_by_map:
             return False  # the map-free baseline casts whatever the map says
         cell = self._estimated_cell()
         return mass_within(self.grid, self.mapper.likelihood, cell, self._declaration.radius_m) >= share

@@ -54,6 +54,7 @@ class InfotaxisPlanner:
     """``infotaxis``: one step to the admissible neighbour with the least expected entropy."""
 
     name: ClassVar[str] = "infotaxis"
+    steers_by_map: ClassVar[bool] = True
 
     def __init__(self, grid: Grid, config: PlanningConfig) -> None:
         self.grid = grid

@@ -38,6 +38,7 @@ class SurgeCastPlanner:
     the area (the mission then routes to its estimate with A*)."""
 
     name: ClassVar[str] = "surge-cast"
+    steers_by_map: ClassVar[bool] = False
 
     def __init__(self, grid: Grid, config: PlanningConfig) -> None:
         self.grid = grid

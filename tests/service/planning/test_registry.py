@@ -13,6 +13,8 @@ def test_every_configurable_method_has_a_planner_and_back() -> None:
     for method in PlanningMethod:
         planner = make_planner(G, PlanningConfig(method=method))
         assert planner.name == method.value
+        # only the moth-inspired baseline steers without the map
+        assert planner.steers_by_map == (method is not PlanningMethod.SURGE_CAST)
 
 
 def test_default_is_the_obstacle_free_astar() -> None:
