@@ -13,7 +13,7 @@ from typing import Any
 
 from service.config import Config
 from service.errors import ConfigError
-from sim_bridge.scenarios import available_scenarios, build_world, load_scenario
+from sim_bridge.scenarios import add_world_arguments, build_world, load_scenario
 from sim_bridge.sitl_bridge import MAV_COMP_ID_PERIPHERAL, BridgeOptions, SitlBridge
 
 log = logging.getLogger(__name__)
@@ -41,20 +41,7 @@ def add_parser(subparsers: Any, name: str) -> argparse.ArgumentParser:
         help="the service's side; udpout reaches the service's default udpin:0.0.0.0:14550 "
         "(default: %(default)s)",
     )
-    parser.add_argument(
-        "--scenario",
-        default="wang-laminar",
-        help=f"scenario ({', '.join(available_scenarios())}) or a TOML path (default: %(default)s)",
-    )
-    parser.add_argument("--seed", type=int, default=None, help="world seed (default: the scenario's)")
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario key, e.g. world.source.position_m=[20.0,0.0] (repeatable)",
-    )
+    add_world_arguments(parser, "wang-laminar")
     parser.add_argument(
         "--component-id",
         type=int,

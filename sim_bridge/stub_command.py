@@ -10,7 +10,7 @@ import signal
 from typing import Any
 
 from service.signing import load_signing_key
-from sim_bridge.scenarios import available_scenarios, build_world, load_scenario
+from sim_bridge.scenarios import add_world_arguments, build_world, load_scenario
 from sim_bridge.stub import DEFAULT_RATES_HZ, Stream, StubOptions, VehicleStub
 
 log = logging.getLogger(__name__)
@@ -25,12 +25,7 @@ def add_parser(subparsers: Any, name: str) -> argparse.ArgumentParser:
         description="A simulated ArduPilot rover (or sub) over MAVLink 2, driving in a scenario's "
         "world: flow, filament plume and chemical detector.",
     )
-    parser.add_argument(
-        "--scenario",
-        default="farrell2003",
-        help=f"scenario name ({', '.join(available_scenarios())}) or a TOML path (default: %(default)s)",
-    )
-    parser.add_argument("--seed", type=int, default=None, help="world seed (default: the scenario's)")
+    add_world_arguments(parser, "farrell2003")
     parser.add_argument(
         "--url",
         default=StubOptions.url,
@@ -40,14 +35,6 @@ def add_parser(subparsers: Any, name: str) -> argparse.ArgumentParser:
         "--speed", type=float, default=1.0, help="simulated seconds per wall second (default: %(default)s)"
     )
     parser.add_argument("--system-id", type=int, default=1, help="MAVLink system id (default: %(default)s)")
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario key, e.g. world.flow.strength_mps=0.2 (repeatable)",
-    )
     parser.add_argument("--no-wind", action="store_true", help="do not stream WIND (ArduPilot's flow)")
     parser.add_argument("--no-wind-cov", action="store_true", help="do not stream WIND_COV (PX4's flow)")
     parser.add_argument("--chem-det", action="store_true", help="also stream NAMED_VALUE_INT detections")
