@@ -50,7 +50,6 @@ lowest flat index, as ``numpy.argmax`` does.
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -102,7 +101,7 @@ class Declarer:
         self._since_s = 0.0
         self._firing_since_s: float | None = None  # since when a rule fires for self._cell
         self._passed_upflow = False  # the vehicle has been upflow_pass_m upflow of self._cell
-        self._odour: deque[tuple[float, float, float]] = deque()  # detections (t, x, y), persist_s
+        self._odour: list[tuple[float, float, float]] = []  # detections (t, x, y), for persist_s
 
     @property
     def passed_upflow(self) -> bool:
@@ -132,7 +131,9 @@ class Declarer:
         With ``vehicle_m`` (x, y), nothing fires while the vehicle is farther than
         ``visit_radius_m`` from the estimated cell's centre. With ``upflow_pass_m`` > 0, nothing
         fires until the vehicle (``vehicle_m``) has been that far upflow of the centre against
-        ``flow`` (the mean flow direction, any length); without both, never."""
+        ``flow`` (the mean flow direction, any length); without both, never. With ``persist_s``
+        > 0, nothing fires until ``detected`` ticks (odour at ``vehicle_m``) near the estimate
+        span that long."""
         if self._cell is None:
             return None
         if detected and vehicle_m is not None and self.config.persist_s > 0.0:
