@@ -16,7 +16,7 @@ are summarised over all runs with a failed run counted as never declared, so the
 p90 are only finite when at least half / 90 % of the runs succeeded.
 
 Each failure is put in one class, so a configuration that misses its target says where its time
-went: the plume never smelled; smelled, but the vehicle never came within one cell of the
+went: the plume was never smelled; it was, but the vehicle never came within one cell of the
 source's cell; came there, but not declared (and whether the map's estimate was on the source at
 the end, i.e. the declaration rule was still waiting); or a wrong declaration.
 """
