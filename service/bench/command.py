@@ -11,6 +11,19 @@ from service.bench import mapping, search
 from sim_bridge.scenarios import load_scenario
 
 
+def _at_least(minimum: int) -> Any:
+    """An argparse type: an integer of at least ``minimum``, or a usage error naming the bound."""
+
+    def parse(text: str) -> int:
+        value = int(text)
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
+        return value
+
+    parse.__name__ = "integer"  # argparse names the type in "invalid integer value"
+    return parse
+
+
 def add_parser(subparsers: Any, name: str) -> None:
     parser = subparsers.add_parser(name, help="benchmarks (mapping speed and memory, ...)")
     kinds = parser.add_subparsers(dest="bench", required=True, metavar="BENCH")
@@ -35,11 +48,11 @@ def add_parser(subparsers: Any, name: str) -> None:
         help="planner (repeat, or 'all'; default: the scenario's)",
     )
     s.add_argument(
-        "--runs", type=int, default=20, help="missions per configuration, seeds 0..N-1 (default 20)"
+        "--runs", type=_at_least(1), default=20, help="missions per configuration, seeds 0..N-1 (default 20)"
     )
     s.add_argument(
         "--first-seed",
-        type=int,
+        type=_at_least(0),
         default=0,
         help="start the seeds here: K..K+N-1 (default 0; another set checks a tuned setting)",
     )

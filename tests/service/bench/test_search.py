@@ -175,6 +175,16 @@ def test_command_prints_one_json_object_per_configuration(capsys: pytest.Capture
         assert sum(row["failures"].values()) == round(2 * (1.0 - row["success_rate"]))
 
 
+@pytest.mark.parametrize(("option", "value"), [("--runs", "0"), ("--first-seed", "-1")])
+def test_command_refuses_a_count_out_of_range(
+    option: str, value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        main(["bench", "search", "--scenario", "wang-laminar", option, value])
+    assert exit_.value.code == 2
+    assert f"{option}: must be at least" in capsys.readouterr().err
+
+
 def test_command_text_says_where_the_failures_stopped(capsys: pytest.CaptureFixture[str]) -> None:
     # 20 s is too short for any wang mission: both runs fail, and the line classes them
     code = main(
