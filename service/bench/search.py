@@ -329,6 +329,7 @@ def summarise(
     if not results:
         raise ValueError("no runs to summarise")
     times = [r.time_s if r.correct else math.inf for r in results]
+    classes = [r.failure for r in results]
     return SearchSummary(
         scenario=scenario,
         mapper=mapper,
@@ -341,9 +342,10 @@ def summarise(
         wrong_declarations=sum(r.wrong for r in results),
         undeclared=sum(not r.declared for r in results),
         max_time_s=max_time_s,
-        failures={kind: sum(r.failure is kind for r in results) for kind in FailureClass},
+        failures={kind: classes.count(kind) for kind in FailureClass},
         undeclared_estimate_on_source=sum(
-            r.failure is FailureClass.UNDECLARED_AT_SOURCE and r.estimate_on_source for r in results
+            c is FailureClass.UNDECLARED_AT_SOURCE and r.estimate_on_source
+            for c, r in zip(classes, results, strict=True)
         ),
         median_first_detection_s=_quantile_or_none(
             [math.inf if r.first_detection_s is None else r.first_detection_s for r in results], 0.5
