@@ -139,6 +139,10 @@ class PlanningConfig(_Section):
     """The first zigzag leg advances a spacing along the flow instead of crossing at the start's line."""
     zigzag_downflow_near_edge: bool = False
     """A start less than one zigzag spacing from the upflow edge sweeps downflow first."""
+    zigzag_young_plume_s: float = Field(default=0.0, ge=0, le=3600)
+    """For a plume released since the mission began: the mission's first upflow sweep first runs
+    upflow so that its first leg can meet a plume that young (``planning.zigzag.young_plume_lead``,
+    with this as the time from the leg's start to the plume); 0: off, for a source long released."""
     cast_width_m: float = Field(default=10.0, gt=0)
     cast_legs: int = Field(default=4, ge=0, le=100)
     lost_trace_mass: float = Field(default=0.0, ge=0, le=1)

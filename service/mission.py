@@ -7,7 +7,9 @@ tracing, and source declaration". The states:
   (``planning.zigzag``), sweeping back the other way when it reaches the edge of the area, laid
   out anew when the mean flow over the mapper's history turns by more than 45 degrees. It goes
   upflow first, or with ``zigzag_downflow_near_edge`` downflow from a start less than a spacing
-  from the upflow edge.
+  from the upflow edge. With ``zigzag_young_plume_s`` > 0 (a release begun with the mission) the
+  first upflow sweep first runs upflow, so that its first leg crosses where the young plume
+  already reaches (``zigzag.young_plume_lead``).
 - ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate.
 - ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
   last detection (``planning.cast``), then the planner again. A detection returns to ``TRACE``.
@@ -56,7 +58,7 @@ from service.planning.crossflow import FlowFrame
 from service.planning.declaration import Declarer, mass_within
 from service.planning.reach import Reachability
 from service.planning.safety import clamped_cell, safe_plan, segment_clear
-from service.planning.zigzag import sweeps_upflow_first, zigzag_vertices
+from service.planning.zigzag import sweeps_upflow_first, young_plume_lead, zigzag_vertices
 
 if TYPE_CHECKING:
     from service.config import Config
@@ -189,6 +191,9 @@ class Mission:
         self._last_time: float | None = None
         self._last_detection: tuple[float, float, float] | None = None  # (t, x, y)
         self._frame: FlowFrame | None = None
+        self._flow_mps = 0.0  # mean flow speed over the mapper's flow history
+        self._started_s: float | None = None  # time of the mission's first tick
+        self._first_sweep = True  # the next sweep laid is the mission's first (zigzag_young_plume_s)
         self._pattern: tuple[Waypoint, ...] = ()
         self._pattern_index = 0
         self._sweep_frame: FlowFrame | None = None
@@ -228,6 +233,7 @@ class Mission:
         x, y = state["last_detection_x"], state["last_detection_y"]
         self._last_detection = None if t is None else (float(t), float(x), float(y))
         self._state = phase
+        self._first_sweep = False  # the plume's age since the mission began is not saved
         if phase is not MissionState.FIND and self._last_time is not None:
             self._declarer.arm(self._last_time, self.mapper.likelihood)
 
@@ -237,6 +243,8 @@ class Mission:
             # a repeated or out-of-order tick changes nothing (the mapper would ignore it too)
             return MissionOutput(obs.time_s, self._state, None, (), self.mapper.estimate())
         self._last_time = obs.time_s
+        if self._started_s is None:
+            self._started_s = obs.time_s
         self.mapper.update(obs)
         self._frame = self._mean_flow_frame(obs)
         estimate = self.mapper.estimate()
@@ -256,10 +264,13 @@ class Mission:
 
     def _mean_flow_frame(self, obs: Observation) -> FlowFrame:
         """The direction of the mean flow over the mapper's flow history (this tick's flow before
-        there is any): turbulent noise on single ticks must not turn the sweep around."""
+        there is any): turbulent noise on single ticks must not turn the sweep around. Keeps the
+        mean's speed in ``_flow_mps``."""
         history = self.mapper.history
         dx = sum(step.dx_m for step in history) if history else obs.flow_x
         dy = sum(step.dy_m for step in history) if history else obs.flow_y
+        dt = sum(step.dt_s for step in history) if history else 1.0
+        self._flow_mps = math.hypot(dx, dy) / dt
         return FlowFrame.from_flow(dx, dy, self._frame)
 
     # -- state machine -------------------------------------------------------------------------
@@ -377,6 +388,13 @@ class Mission:
 
     def _lay_sweep(self, ctx: PlanContext, frame: FlowFrame) -> None:
         v = ctx.vehicle
+        lead = 0.0
+        young_s = self.planning.zigzag_young_plume_s
+        if self._first_sweep and self._sweep_upflow and young_s > 0.0:
+            now = self._last_time or 0.0
+            age = young_s + now - (now if self._started_s is None else self._started_s)
+            lead = young_plume_lead(self.grid, v.x, v.y, frame, self._flow_mps, age)
+        self._first_sweep = False
         self._sweep_frame = frame
         self._pattern = zigzag_vertices(
             self.grid,
@@ -386,6 +404,7 @@ class Mission:
             self.planning.zigzag_spacing_m,
             upflow=self._sweep_upflow,
             diagonal_start=self.planning.zigzag_diagonal_start,
+            lead_m=lead,
         )
         self._pattern_index = 0
 

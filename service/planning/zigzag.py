@@ -36,6 +36,25 @@ def sweeps_upflow_first(grid: Grid, x: float, y: float, frame: FlowFrame, spacin
     return frame.along(x, y) - lo >= spacing_m
 
 
+def young_plume_lead(
+    grid: Grid, x: float, y: float, frame: FlowFrame, flow_mps: float, age_s: float
+) -> float:
+    """How far a sweep from (x, y) should run upflow before its first leg, for a plume whose
+    release began ``age_s`` before a first leg begun at (x, y) would meet it (0 for ``age_s`` 0).
+
+    Such a plume reaches at most ``flow_mps`` times its age downflow of its source, so a leg
+    crossing the flow at along-position a meets only the sources from a to that far upflow of a.
+    Running L m upflow first (with the vehicle about as fast as the flow) makes the plume L s older
+    where the leg meets it, so the leg covers the sources from L to 2 L + ``flow_mps`` ``age_s``
+    upflow of the start: L = (d - ``flow_mps`` ``age_s``) / 2, for a start d m downflow of the upflow
+    edge, makes that reach the edge. A start nearer the edge needs no lead.
+    """
+    if age_s <= 0.0 or not math.isfinite(flow_mps):
+        return 0.0
+    lo, _ = along_range(grid, frame)
+    return max(0.0, (frame.along(x, y) - lo - max(flow_mps, 0.0) * age_s) / 2.0)
+
+
 def zigzag_vertices(
     grid: Grid,
     x: float,
@@ -45,6 +64,7 @@ def zigzag_vertices(
     *,
     upflow: bool = True,
     diagonal_start: bool = False,
+    lead_m: float = 0.0,
 ) -> tuple[Waypoint, ...]:
     """Turning points of a zigzag from (x, y) to the upflow (or downflow) edge of the area.
 
@@ -60,11 +80,23 @@ def zigzag_vertices(
     advances along the flow instead of crossing at the start's own line. A plume is detectable
     only so far downflow of its source, so a start far downflow gains a spacing of advance per
     leg from the first one on.
+
+    With ``lead_m`` (upflow only) the pattern first runs straight upflow that far, stopping at the
+    edge, and the zigzag starts from there (``young_plume_lead``).
     """
     if not (math.isfinite(spacing_m) and spacing_m > 0.0):
         raise ValueError(f"zigzag spacing must be positive, got {spacing_m}")
+    if not (math.isfinite(lead_m) and lead_m >= 0.0):
+        raise ValueError(f"zigzag lead must be non-negative, got {lead_m}")
     lo, hi = along_range(grid, frame)
     a = min(max(frame.along(x, y), lo), hi)
+    lead: tuple[Waypoint, ...] = ()
+    if upflow and lead_m > 0.0 and a > lo:
+        a = max(a - lead_m, lo)
+        span = cross_section(grid, frame, a)
+        if span is not None:
+            start = frame.point(a, min(max(frame.cross(x, y), span[0]), span[1]))
+            lead, x, y = (start,), start.x, start.y
     end = lo if upflow else hi
     lines = [a]
     while lines[-1] != end:
@@ -99,4 +131,4 @@ def zigzag_vertices(
                     best = c
             vertices.append(best)
         side = -side
-    return tuple(vertices[1:] if skip else vertices)
+    return lead + tuple(vertices[1:] if skip else vertices)

@@ -519,6 +519,31 @@ def test_a_start_near_the_upflow_edge_sweeps_downflow_first() -> None:
     assert first_leg(47.5, True).x == pytest.approx(17.5)
 
 
+def test_the_first_sweep_leads_upflow_for_a_young_plume() -> None:
+    planning = PlanningConfig(zigzag_spacing_m=30.0, zigzag_diagonal_start=True, zigzag_young_plume_s=40.0)
+    start = VehicleState(AREA.x_centres[0] + 80.0, -40.0)  # 80 m downflow of the upflow edge
+
+    def first_waypoint(mission: Mission, t: float, flow_x: float) -> Waypoint:
+        out = mission.step(Observation(t, start.x, start.y, flow_x, 0.0, False), start)
+        assert out.waypoints is not None
+        return out.waypoints[0]
+
+    # (80 - 1 m/s x 40 s) / 2 = 20 m straight upflow, then the zigzag
+    led = first_waypoint(Mission(AREA, ScriptedMapper(AREA), planning, NEVER), 0.0, 1.0)
+    assert (led.x, led.y) == (pytest.approx(start.x - 20.0), pytest.approx(start.y))
+    # a flow twice as fast carries a 40 s old plume 80 m: no lead
+    fast = first_waypoint(Mission(AREA, ScriptedMapper(AREA), planning, NEVER), 0.0, 2.0)
+    plain = planning.model_copy(update={"zigzag_young_plume_s": 0.0})
+    assert fast == first_waypoint(Mission(AREA, ScriptedMapper(AREA), plain, NEVER), 0.0, 2.0)
+    assert fast.x == pytest.approx(start.x - 30.0)
+    # a restored mission does not know how old the plume is: no lead
+    mission = Mission(AREA, ScriptedMapper(AREA), planning, NEVER)
+    first_waypoint(mission, 0.0, 1.0)
+    restored = Mission(AREA, ScriptedMapper(AREA), planning, NEVER)
+    restored.restore_state(mission.save_state())
+    assert first_waypoint(restored, 1.0, 1.0).x == pytest.approx(start.x - 30.0)
+
+
 def test_probes_beyond_an_obstacle_that_blocks_every_upflow_neighbour() -> None:
     # the estimate is the vehicle's own cell, against the downflow face of a wall: the mission
     # flies round the wall to the first free cell upflow instead of holding at the face
