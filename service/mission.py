@@ -246,7 +246,7 @@ class Mission:
         if self._started_s is None:
             self._started_s = obs.time_s
         self.mapper.update(obs)
-        self._frame = self._mean_flow_frame(obs)
+        self._update_mean_flow(obs)
         estimate = self.mapper.estimate()
         events = self._advance(obs)
         if self._state is MissionState.DECLARED:
@@ -262,16 +262,16 @@ class Mission:
             waypoints = self._emit(vehicle, self._BEHAVIOUR[self._state](self, ctx))
         return MissionOutput(obs.time_s, self._state, waypoints, tuple(events), estimate)
 
-    def _mean_flow_frame(self, obs: Observation) -> FlowFrame:
-        """The direction of the mean flow over the mapper's flow history (this tick's flow before
-        there is any): turbulent noise on single ticks must not turn the sweep around. Keeps the
-        mean's speed in ``_flow_mps``."""
+    def _update_mean_flow(self, obs: Observation) -> None:
+        """The direction (``_frame``) and speed (``_flow_mps``) of the mean flow over the mapper's
+        flow history (this tick's flow before there is any): turbulent noise on single ticks must
+        not turn the sweep around."""
         history = self.mapper.history
         dx = sum(step.dx_m for step in history) if history else obs.flow_x
         dy = sum(step.dy_m for step in history) if history else obs.flow_y
         dt = sum(step.dt_s for step in history) if history else 1.0
         self._flow_mps = math.hypot(dx, dy) / dt
-        return FlowFrame.from_flow(dx, dy, self._frame)
+        self._frame = FlowFrame.from_flow(dx, dy, self._frame)
 
     # -- state machine -------------------------------------------------------------------------
 
@@ -391,9 +391,8 @@ class Mission:
         lead = 0.0
         young_s = self.planning.zigzag_young_plume_s
         if self._first_sweep and self._sweep_upflow and young_s > 0.0:
-            now = self._last_time or 0.0
-            age = young_s + now - (now if self._started_s is None else self._started_s)
-            lead = young_plume_lead(self.grid, v.x, v.y, frame, self._flow_mps, age)
+            elapsed = (self._last_time or 0.0) - (self._started_s or 0.0)
+            lead = young_plume_lead(self.grid, v.x, v.y, frame, self._flow_mps, young_s + elapsed)
         self._first_sweep = False
         self._sweep_frame = frame
         self._pattern = zigzag_vertices(
