@@ -175,7 +175,9 @@ class Mission:
         declaration: DeclarationConfig | None = None,
         *,
         planner: Planner | None = None,
+        admit: Callable[[int], bool] | None = None,
     ) -> None:
+        """``admit``: the declarer's filter of the cells it may name (``Declarer``; benchmarks only)."""
         if mapper.grid != grid:
             raise ValueError("the mapper works on a different grid")
         self.grid = grid
@@ -185,7 +187,7 @@ class Mission:
         self._router = AStarPlanner(grid, self.planning)  # zigzag, cast and fallback legs
         self._reach = Reachability(grid)
         self._declaration = (declaration or DeclarationConfig()).for_mapper(mapper.name)
-        self._declarer = Declarer(grid, self._declaration)
+        self._declarer = Declarer(grid, self._declaration, admit)
         self._check: _Check | None = None  # the upflow check of a cell about to be declared
         self._state = MissionState.FIND
         self._last_time: float | None = None
@@ -206,8 +208,10 @@ class Mission:
         self._pass_probe: tuple[int, Waypoint] | None = None  # (estimate, point) of probe_to_pass
 
     @classmethod
-    def from_config(cls, config: Config, grid: Grid, mapper: SourceMapper) -> Mission:
-        return cls(grid, mapper, config.planning, config.declaration)
+    def from_config(
+        cls, config: Config, grid: Grid, mapper: SourceMapper, *, admit: Callable[[int], bool] | None = None
+    ) -> Mission:
+        return cls(grid, mapper, config.planning, config.declaration, admit=admit)
 
     @property
     def state(self) -> MissionState:

@@ -67,6 +67,12 @@ def add_parser(subparsers: Any, name: str) -> None:
                    help="override a scenario key (e.g. declaration.probability=0.9)")  # fmt: skip
     s.add_argument("--json", action="store_true", help="one JSON object per configuration")
     s.add_argument("--report", metavar="DIR", help="also write report.md and PNG pictures of a mission here")
+    s.add_argument(
+        "--oracle-declaration",
+        action="store_true",
+        help="a bound, not a result: declarations away from the true source are ignored (a perfect guard); "
+        "with --set declaration.* it measures what the guards against wrong declarations cost",
+    )
 
     p = kinds.add_parser("plume", help="filament plume model: steps per second at a puff count")
     p.add_argument("--puffs", type=int, default=10_000, help="live puffs at steady state (default 10000)")
@@ -110,14 +116,17 @@ def _fmt(value: float | None, spec: str) -> str:
 
 
 def _run_search(args: argparse.Namespace) -> int:
+    if args.oracle_declaration and args.report:
+        raise SystemExit("oslim bench search: --oracle-declaration gives a bound, not a result: no --report")
     scenario = load_scenario(args.scenario, args.overrides)
     mappers = search.expand(args.mappers, search.mapper_names(), str(scenario.config.mapping.method))
     planners = search.expand(args.planners, search.planner_names(), str(scenario.config.planning.method))
     if not args.json:
+        oracle = "; ORACLE declaration (a perfect guard: a bound, not a result)"
         print(
             f"{scenario.name}: {args.runs} runs per configuration (seeds {args.first_seed}.."
             f"{args.first_seed + args.runs - 1}), limit {args.max_time:g} s; "
-            "times: failed runs count as never",
+            "times: failed runs count as never" + (oracle if args.oracle_declaration else ""),
             flush=True,
         )
         print(
@@ -129,12 +138,15 @@ def _run_search(args: argparse.Namespace) -> int:
     results: dict[tuple[str, str], list[search.MissionResult]] = {}
     for summary, batch in search.run_configurations(
         args.scenario, mappers, planners, args.runs, jobs=args.jobs, max_time_s=args.max_time,
-        overrides=args.overrides, first_seed=args.first_seed,
+        overrides=args.overrides, first_seed=args.first_seed, oracle=args.oracle_declaration,
     ):  # fmt: skip
         summaries.append(summary)
         results[summary.mapper, summary.planner] = batch
         if args.json:
-            print(json.dumps(summary.as_row()), flush=True)
+            row = summary.as_row()
+            if args.oracle_declaration:
+                row["oracle_declaration"] = True
+            print(json.dumps(row), flush=True)
         else:
             print(
                 f"{summary.mapper:<7}{summary.planner:<12}{summary.runs:>5}{summary.success_rate:>9.1%}"

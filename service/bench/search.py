@@ -152,6 +152,7 @@ class MissionSpec:
     seed: int
     max_time_s: float = DEFAULT_MAX_TIME_S
     overrides: tuple[str, ...] = ()
+    oracle: bool = False
 
 
 def configure(scenario: str, mapper: str, planner: str, overrides: Sequence[str] = ()) -> Scenario:
@@ -167,14 +168,27 @@ def within_one_cell(grid: Grid, x: float, y: float, source_x: float, source_y: f
 
 
 def run_mission(
-    scenario: Scenario, seed: int, *, max_time_s: float = DEFAULT_MAX_TIME_S, record: bool = False
+    scenario: Scenario,
+    seed: int,
+    *,
+    max_time_s: float = DEFAULT_MAX_TIME_S,
+    record: bool = False,
+    oracle: bool = False,
 ) -> MissionResult:
-    """One closed-loop mission of ``scenario`` drawn from ``seed``; ``record`` keeps a trace."""
+    """One closed-loop mission of ``scenario`` drawn from ``seed``; ``record`` keeps a trace.
+
+    With ``oracle`` the declaration has a perfect guard: a rule that fires for a cell more than one
+    cell from the true source is ignored. No vehicle has one; it bounds what any guard against
+    wrong declarations (``declaration.upflow_pass_m``, ``persist_s``, ``check_width_m``) can gain."""
     config, grid = scenario.config, scenario.grid
     world = build_world(scenario, seed)
     source = place(scenario, seed).source_m
+
+    def at_source(cell: int) -> bool:
+        return within_one_cell(grid, *grid.centre(cell), *source)
+
     mapper = mapper_from_config(config, grid)
-    mission = Mission.from_config(config, grid, mapper)
+    mission = Mission.from_config(config, grid, mapper, admit=at_source if oracle else None)
     aggregator = TickAggregator(config.sensor.threshold, max_position_age_s=2.0 * config.mapping.tick_s)
     steps_per_tick = max(1, round(config.mapping.tick_s / world.dt_s))
     sample_every = max(1, round(1.0 / (config.mavlink.stream_hz * world.dt_s)))
@@ -262,7 +276,7 @@ def run_mission(
 def run_spec(spec: MissionSpec) -> MissionResult:
     """``run_mission`` from a picklable description (the process pool's task)."""
     scenario = configure(spec.scenario, spec.mapper, spec.planner, spec.overrides)
-    return run_mission(scenario, spec.seed, max_time_s=spec.max_time_s)
+    return run_mission(scenario, spec.seed, max_time_s=spec.max_time_s, oracle=spec.oracle)
 
 
 @dataclass(frozen=True)
@@ -387,11 +401,12 @@ def run_configurations(
     max_time_s: float = DEFAULT_MAX_TIME_S,
     overrides: Sequence[str] = (),
     first_seed: int = 0,
+    oracle: bool = False,
 ) -> Iterable[tuple[SearchSummary, list[MissionResult]]]:
     """Every mapper x planner configuration over seeds first_seed..first_seed+runs-1 (a second
     set of seeds checks that a setting chosen on the first did not just fit those missions), in a
     pool of ``jobs`` processes (default: the cores); yields each configuration's summary as soon
-    as its runs are done."""
+    as its runs are done. ``oracle``: every mission with the perfect declaration guard (``run_mission``)."""
     if runs < 1:
         raise ValueError("runs must be >= 1")
     if first_seed < 0:
@@ -400,7 +415,7 @@ def run_configurations(
     workers = jobs or os.cpu_count() or 1
     configs = [(m, p) for m in mappers for p in planners]
     specs = [
-        MissionSpec(scenario, m, p, seed, max_time_s, tuple(overrides))
+        MissionSpec(scenario, m, p, seed, max_time_s, tuple(overrides), oracle)
         for m, p in configs
         for seed in range(first_seed, first_seed + runs)
     ]

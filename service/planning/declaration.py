@@ -50,6 +50,7 @@ lowest flat index, as ``numpy.argmax`` does.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -92,11 +93,19 @@ def mass_within(grid: Grid, likelihood: FloatArray, cell: int, radius_m: float) 
 
 
 class Declarer:
-    """Keeps the stable rule's clock and checks both rules once per tick after ``arm``."""
+    """Keeps the stable rule's clock and checks both rules once per tick after ``arm``.
 
-    def __init__(self, grid: Grid, config: DeclarationConfig) -> None:
+    ``admit`` (flat cell -> bool), when given, is asked last: a rule that fires for a cell it
+    refuses is ignored. The benchmark's perfect guard (``oslim bench search
+    --oracle-declaration``) admits only cells within one cell of the true source, to measure how
+    much success the declaration's guards cost; a mission on a vehicle never has one."""
+
+    def __init__(
+        self, grid: Grid, config: DeclarationConfig, admit: Callable[[int], bool] | None = None
+    ) -> None:
         self.grid = grid
         self.config = config
+        self._admit = admit
         self._cell: int | None = None
         self._since_s = 0.0
         self._firing_since_s: float | None = None  # since when a rule fires for self._cell
@@ -161,6 +170,8 @@ class Declarer:
         }
         rules = tuple(dict.fromkeys(r for r in self.config.rules if fired[r]))
         if rules and not self._odour_persists(cell):
+            rules = ()
+        if rules and self._admit is not None and not self._admit(cell):
             rules = ()
         if not rules:
             self._firing_since_s = None

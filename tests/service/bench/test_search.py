@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import pytest
 
@@ -173,6 +174,34 @@ def test_command_prints_one_json_object_per_configuration(capsys: pytest.Capture
         assert row["runs"] == 2
         assert 0.0 <= row["success_rate"] <= 1.0
         assert sum(row["failures"].values()) == round(2 * (1.0 - row["success_rate"]))
+
+
+def test_oracle_declaration_ignores_a_wrong_declaration() -> None:
+    # farrell2003 seed 8 without the upflow check names (26.25, -4), 6 m off the source, at 86 s;
+    # the perfect guard ignores that cell and the mission goes on
+    scenario = search.configure("farrell2003", "pomdp", "astar", ["declaration.check_width_m=0"])
+    plain = run_mission(scenario, 8, max_time_s=120.0)
+    assert plain.wrong
+    assert plain.declared_x == pytest.approx(26.25)
+    oracle = run_mission(scenario, 8, max_time_s=120.0, oracle=True)
+    assert not oracle.wrong
+    if oracle.declared_x is not None and oracle.declared_y is not None:
+        where = (oracle.declared_x, oracle.declared_y, oracle.source_x, oracle.source_y)
+        assert within_one_cell(scenario.grid, *where)
+
+
+def test_command_marks_oracle_rows_and_refuses_an_oracle_report(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    args = ["bench", "search", "--scenario", "wang-laminar", "--mapper", "pomdp", "--planner", "astar",
+            "--runs", "1", "--jobs", "1", "--max-time", "20", "--oracle-declaration"]  # fmt: skip
+    assert main([*args, "--json"]) == 0
+    (row,) = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.startswith("{")]
+    assert row["oracle_declaration"] is True
+    assert main(args) == 0
+    assert "ORACLE declaration" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="a bound, not a result"):
+        main([*args, "--report", str(tmp_path)])
 
 
 @pytest.mark.parametrize(("option", "value"), [("--runs", "0"), ("--first-seed", "-1")])

@@ -168,3 +168,16 @@ def test_persist_is_off_by_default_and_for_the_hmm() -> None:
     pi = peaked(12, 0.6)
     d.arm(0.0, pi)
     assert d.update(1.0, pi, (2.5, 2.5)) is not None  # no odour needed at all
+
+
+def test_admit_ignores_a_rule_for_a_refused_cell() -> None:
+    # the benchmark's perfect guard: the same peaked map fires for an admitted cell only
+    config = DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0)
+    refused = Declarer(G, config, admit=lambda cell: cell != 12)
+    refused.arm(0.0, peaked(12, 0.6))
+    assert all(refused.update(float(t), peaked(12, 0.6)) is None for t in range(1, 20))
+    admitted = Declarer(G, config, admit=lambda cell: cell == 12)
+    admitted.arm(0.0, peaked(12, 0.6))
+    found = admitted.update(1.0, peaked(12, 0.6))
+    assert found is not None
+    assert found.cell == 12
