@@ -41,6 +41,7 @@ planner aims at the nearest reachable cell instead; when a planner still finds n
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from enum import StrEnum
@@ -55,7 +56,7 @@ from service.planning.astar import AStarPlanner
 from service.planning.base import PlanContext, Waypoint
 from service.planning.cast import cast_vertices
 from service.planning.crossflow import FlowFrame
-from service.planning.declaration import Declarer, mass_within
+from service.planning.declaration import Declarer, OdourSample, mass_within, steady_odour
 from service.planning.reach import Reachability
 from service.planning.safety import clamped_cell, safe_plan, segment_clear
 from service.planning.zigzag import sweeps_upflow_first, young_plume_lead, zigzag_vertices
@@ -206,6 +207,8 @@ class Mission:
         self._paused_sweep: tuple[tuple[Waypoint, ...], int] | None = None  # (pattern, index) at contact
         self._contact_hits = 0  # detections since the sweep was paused
         self._pass_probe: tuple[int, Waypoint] | None = None  # (estimate, point) of probe_to_pass
+        self._recent: deque[OdourSample] = deque()  # the last ticks, for steady_odour
+        self._first_odour_s: float | None = None  # the mission's first detection (this run)
 
     @classmethod
     def from_config(
@@ -251,6 +254,7 @@ class Mission:
             self._started_s = obs.time_s
         self.mapper.update(obs)
         self._update_mean_flow(obs)
+        self._remember(obs)
         estimate = self.mapper.estimate()
         events = self._advance(obs)
         if self._state is MissionState.DECLARED:
@@ -265,6 +269,18 @@ class Mission:
             )
             waypoints = self._emit(vehicle, self._BEHAVIOUR[self._state](self, ctx))
         return MissionOutput(obs.time_s, self._state, waypoints, tuple(events), estimate)
+
+    def _remember(self, obs: Observation) -> None:
+        """Keep this tick for ``steady_odour`` (only while the steady-odour test is enabled)."""
+        if obs.detected and self._first_odour_s is None:
+            self._first_odour_s = obs.time_s
+        d = self._declaration
+        if d.steady_hit_rate <= 0.0:
+            return
+        self._recent.append(OdourSample(obs.time_s, obs.x, obs.y, obs.detected, obs.flow_x, obs.flow_y))
+        keep_s = max(d.steady_window_s, d.steady_turn_window_s)
+        while self._recent and self._recent[0].time_s <= obs.time_s - keep_s:
+            self._recent.popleft()
 
     def _update_mean_flow(self, obs: Observation) -> None:
         """The direction (``_frame``) and speed (``_flow_mps``) of the mean flow over the mapper's
@@ -351,6 +367,11 @@ class Mission:
             return True
         if self._check is not None and self._check.cell == found.cell:
             return False
+        frame = self._frame
+        if steady_odour(
+            self._recent, found.x, found.y, self._first_odour_s, (frame.ux, frame.uy), self._declaration
+        ):
+            return True  # the odour there has been steady: a source, not a plume swung over it
         frame, upflow = self._frame, self._declaration.check_upflow_m
         ax, ay = found.x - upflow * frame.ux, found.y - upflow * frame.uy
         legs = cast_vertices(self.grid, ax, ay, frame, width, 2)

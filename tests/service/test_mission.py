@@ -699,3 +699,51 @@ def test_the_probe_upflow_can_fly_until_the_upflow_pass_is_made(probe_to_pass: b
     out = mission.step(Observation(2.0, v.x, v.y, *flow, False), v)
     assert out.waypoints is not None
     assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)
+
+
+def steady_mission(hits: list[bool], turn: float = 0.0) -> MissionOutput:
+    """A mission with the check and the steady-odour test: the vehicle held at SOURCE's centre with
+    odour in the ticks ``hits`` says while the map is flat, then one more tick with odour in which
+    the map becomes sure of SOURCE; that tick's output. The flow is (1, -turn) m/s until the last
+    40 ticks and (1, turn) in them (East with ``turn`` 0)."""
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.05)
+    mission = mission_with(
+        mapper, rules=[DeclarationRule.MASS], probability=0.8, check_width_m=6.0, steady_hit_rate=0.75
+    )
+    sx, sy = AREA.centre(SOURCE)
+    vehicle = VehicleState(sx, sy)
+    n = len(hits)
+    for t, hit in enumerate(hits):
+        fy = turn if t > n - 40 else -turn
+        out = mission.step(Observation(float(t), sx, sy, 1.0, fy, hit), vehicle)
+        assert out.state is MissionState.TRACE
+    mapper.peak_at(SOURCE, 0.9)
+    return mission.step(Observation(float(n), sx, sy, 1.0, turn, True), vehicle)
+
+
+def test_steady_odour_at_the_estimate_is_declared_without_the_check() -> None:
+    out = steady_mission([t % 5 != 4 for t in range(50)])  # odour in 4 ticks of 5, for 50 s
+    assert out.state is MissionState.DECLARED
+    (declared,) = out.events
+    assert isinstance(declared, SourceDeclared)
+    assert (declared.x, declared.y) == AREA.centre(SOURCE)
+
+
+@pytest.mark.parametrize(
+    ("hits", "turn"),
+    [
+        ([t % 2 == 0 for t in range(50)], 0.0),  # odour in half the ticks: a plume swung over it
+        ([t % 5 != 4 for t in range(30)], 0.0),  # odour first met only 30 s ago
+        # the flow of the last 40 s has turned 53 degrees from before: its mean over the 50 s
+        # window lies 9 degrees from it (a plume being swung aside smells steady for a while)
+        ([t % 5 != 4 for t in range(50)], 0.5),
+    ],
+)
+def test_odour_that_is_not_steady_is_checked_first(hits: list[bool], turn: float) -> None:
+    out = steady_mission(hits, turn)
+    assert out.state is MissionState.TRACE
+    assert out.events == ()
+    assert out.waypoints is not None  # to the check's first turning point: 3 m upflow, 6 m aside
+    sx, sy = AREA.centre(SOURCE)
+    assert math.hypot(out.waypoints[0].x - sx, out.waypoints[0].y - sy) == pytest.approx(math.hypot(3.0, 6.0))
