@@ -233,7 +233,9 @@ class Mission:
 
     def restore_state(self, state: dict[str, Any]) -> None:
         """Continue in the phase ``save_state`` saved; a sweep or cast pattern is laid out anew,
-        and past the first detection the declaration rules are re-armed from the restored map."""
+        and past the first detection the declaration rules are re-armed from the restored map.
+        The steady-odour record is not saved: it starts afresh, so no check is skipped until it
+        has filled again (``steady_min_contact_s`` after the next odour)."""
         phase = MissionState(state["phase"])
         self._last_time = None if state["last_time"] is None else float(state["last_time"])
         t = state["last_detection_t"]
