@@ -387,12 +387,14 @@ class Service:
             self.declared = event
             rules = "+".join(str(r) for r in event.rules)
             name, text = "source_declared", f"OSLIM source at {event.x:.1f},{event.y:.1f} ({rules})"
-        log.info("%s (t=%.1f s)", text, event.time_s)
+        # the log and the recording also say how the cell was checked; STATUSTEXT carries 50 characters
+        detail = text if not isinstance(event, SourceDeclared) else f"{text}, check {event.check}"
+        log.info("%s (t=%.1f s)", detail, event.time_s)
         self.stats.events.append({"time_s": event.time_s, "name": name, "x": event.x, "y": event.y})
         if self._link is not None:
             self._link.send_statustext(text)
         if self._recorder is not None:
-            self._recorder.write_event(event.time_s, name, text, x=event.x, y=event.y)
+            self._recorder.write_event(event.time_s, name, detail, x=event.x, y=event.y)
 
     # -- commanding -----------------------------------------------------------------------------
 

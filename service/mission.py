@@ -113,9 +113,18 @@ class PlumeLost:
     last_detection_s: float
 
 
+class CrossCheck(StrEnum):
+    """How a declared cell was vouched for by the check across the flow (``check_width_m``)."""
+
+    FLOWN = "flown"  # flown, no odour upflow
+    STEADY = "steady"  # skipped: the odour near the cell had been steady (``steady_odour``)
+    OFF = "off"  # no check configured (or no flow direction yet)
+
+
 @dataclass(frozen=True)
 class SourceDeclared:
-    """The source is declared in the papers' cell ``cell`` centred on (x, y); ``rules`` fired."""
+    """The source is declared in the papers' cell ``cell`` centred on (x, y); ``rules`` fired;
+    ``check``: how the check across the flow vouched for it."""
 
     time_s: float
     x: float
@@ -124,6 +133,7 @@ class SourceDeclared:
     probability: float
     mass: float
     rules: tuple[DeclarationRule, ...]
+    check: CrossCheck = CrossCheck.OFF
 
 
 MissionEvent = PlumeFound | PlumeLost | SourceDeclared
@@ -332,7 +342,9 @@ class Mission:
         if self._declarer.armed:
             flow = None if self._frame is None else (self._frame.ux, self._frame.uy)
             found = self._declarer.update(t, self.mapper.likelihood, (obs.x, obs.y), flow, obs.detected)
+            check: CrossCheck | None = None
             if self._check is not None and self._check.done:
+                check = CrossCheck.FLOWN
                 # flown with no odour upflow: the rule fired at the estimate when the check began
                 lik = self.mapper.likelihood
                 found = replace(
@@ -341,9 +353,9 @@ class Mission:
                     probability=float(lik.flat[self._check.cell]),
                     mass=mass_within(self.grid, lik, self._check.cell, self._declaration.radius_m),
                 )
-            elif found is not None and not self._checked(found):
-                found = None
-            if found is not None:
+            elif found is not None:
+                check = self._checked(found)
+            if found is not None and check is not None:
                 events.append(
                     SourceDeclared(
                         time_s=t,
@@ -353,6 +365,7 @@ class Mission:
                         probability=found.probability,
                         mass=found.mass,
                         rules=found.rules,
+                        check=check,
                     )
                 )
                 self._enter(MissionState.DECLARED)
@@ -361,26 +374,26 @@ class Mission:
     def _estimated_cell(self) -> int:
         return int(np.argmax(self.mapper.likelihood))
 
-    def _checked(self, found: Declaration) -> bool:
-        """Whether ``found`` may be declared now (the upflow check is off); otherwise the check of
-        its cell is started, or goes on."""
+    def _checked(self, found: Declaration) -> CrossCheck | None:
+        """How ``found`` may be declared now without the upflow check (off, or steady odour); None
+        while the check of its cell is started, or goes on."""
         width = self._declaration.check_width_m
         if width <= 0.0 or self._frame is None:
-            return True
+            return CrossCheck.OFF
         if self._check is not None and self._check.cell == found.cell:
-            return False
+            return None
         frame = self._frame
         if steady_odour(
             self._recent, found.x, found.y, self._first_odour_s, (frame.ux, frame.uy), self._declaration
         ):
-            return True  # the odour there has been steady: a source, not a plume swung over it
+            return CrossCheck.STEADY  # a source, not a plume swung over it
         frame, upflow = self._frame, self._declaration.check_upflow_m
         ax, ay = found.x - upflow * frame.ux, found.y - upflow * frame.uy
         legs = cast_vertices(self.grid, ax, ay, frame, width, 2)
         self._check = _Check(found, frame, 0.5 * upflow)
         self._pattern, self._pattern_index = legs, 0
         self._probe = None
-        return False
+        return None
 
     def _end_check(self) -> None:
         self._check = None

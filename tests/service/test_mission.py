@@ -10,7 +10,15 @@ from service.grid import Grid
 from service.mapping.belief import FloatArray
 from service.mapping.hmm import HmmMapper
 from service.mapping.mapper import SourceMapper
-from service.mission import Mission, MissionOutput, MissionState, PlumeFound, PlumeLost, SourceDeclared
+from service.mission import (
+    CrossCheck,
+    Mission,
+    MissionOutput,
+    MissionState,
+    PlumeFound,
+    PlumeLost,
+    SourceDeclared,
+)
 from service.observation import Observation
 from service.planning import PLANNERS
 from service.planning.base import VehicleState, Waypoint
@@ -628,6 +636,7 @@ def test_the_upflow_check_crosses_the_flow_upflow_of_the_estimate_before_declari
     (declared,) = out.events
     assert isinstance(declared, SourceDeclared)
     assert (declared.x, declared.y) == (sx, sy)
+    assert declared.check is CrossCheck.FLOWN
 
 
 def test_odour_upflow_of_the_estimate_calls_the_check_off() -> None:
@@ -728,6 +737,7 @@ def test_steady_odour_at_the_estimate_is_declared_without_the_check() -> None:
     (declared,) = out.events
     assert isinstance(declared, SourceDeclared)
     assert (declared.x, declared.y) == AREA.centre(SOURCE)
+    assert declared.check is CrossCheck.STEADY
 
 
 @pytest.mark.parametrize(
