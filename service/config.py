@@ -204,6 +204,9 @@ class DeclarationConfig(_Section):
     steady_radius_m: float = Field(default=2.5, gt=0)
     steady_min_ticks: int = Field(default=10, ge=1)
     """The least number of ticks near the estimate in the window for the share to count."""
+    steady_min_span_s: float = Field(default=0.0, ge=0)
+    """The first and last odour near the estimate in the window at least this far apart, s: a
+    plume swung over a place can give steady odour there for half a minute."""
     steady_min_contact_s: float = Field(default=40.0, ge=0)
     """How long since the mission's first odour, s, before the check may be skipped."""
     steady_turn_window_s: float = Field(default=40.0, gt=0)

@@ -113,7 +113,8 @@ def steady_odour(
 ) -> bool:
     """Whether the odour at (x, y) has been steady enough to name it without the check across the
     flow: over the last ``steady_window_s`` the vehicle spent at least ``steady_min_ticks`` ticks
-    within ``steady_radius_m`` of it and smelled odour in at least ``steady_hit_rate`` of them;
+    within ``steady_radius_m`` of it and smelled odour in at least ``steady_hit_rate`` of them,
+    the first and last of those at least ``steady_min_span_s`` apart;
     the mission's first odour came at least ``steady_min_contact_s`` ago; and the flow of the last
     ``steady_turn_window_s`` has turned, on average, no more than ``steady_max_turn_deg`` from
     ``flow_direction`` (the mean flow, a unit vector). ``samples`` are in time order, the newest
@@ -125,11 +126,14 @@ def steady_odour(
     if now - first_odour_s < c.steady_min_contact_s - 1e-9:
         return False
     near = [
-        s.detected
+        s
         for s in samples
         if s.time_s > now - c.steady_window_s and math.hypot(s.x - x, s.y - y) < c.steady_radius_m
     ]
-    if len(near) < c.steady_min_ticks or sum(near) < c.steady_hit_rate * len(near) - 1e-9:
+    odour = [s.time_s for s in near if s.detected]
+    if len(near) < c.steady_min_ticks or len(odour) < c.steady_hit_rate * len(near) - 1e-9:
+        return False
+    if max(odour) - min(odour) < c.steady_min_span_s - 1e-9:
         return False
     ux, uy = flow_direction
     turns = [

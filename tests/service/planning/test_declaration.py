@@ -215,3 +215,12 @@ def test_steady_odour_is_refused_under_a_turned_flow_and_off_by_default() -> Non
     assert steady_odour(record, 0.0, 0.0, 0.0, (math.cos(0.1), math.sin(0.1)), STEADY)  # 5.7 degrees
     assert not steady_odour(record, 0.0, 0.0, 0.0, (math.cos(0.11), math.sin(0.11)), STEADY)  # 6.3
     assert not steady_odour(record, 0.0, 0.0, 0.0, (1.0, 0.0), DeclarationConfig())
+
+
+def test_steady_odour_can_ask_for_the_odour_to_span_a_time() -> None:
+    # odour in 4 ticks of 5 over the last 25 s only, near the place for 25 ticks
+    record = odour_record([t % 5 != 4 for t in range(25)])
+    assert steady_odour(record, 0.0, 0.0, -40.0, (1.0, 0.0), STEADY)
+    spanning = STEADY.model_copy(update={"steady_min_span_s": 30.0})
+    assert not steady_odour(record, 0.0, 0.0, -40.0, (1.0, 0.0), spanning)
+    assert steady_odour(odour_record([t % 5 != 4 for t in range(40)]), 0.0, 0.0, -40.0, (1.0, 0.0), spanning)
