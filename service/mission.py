@@ -387,7 +387,7 @@ class Mission:
             self._recent, found.x, found.y, self._first_odour_s, (frame.ux, frame.uy), self._declaration
         ):
             return CrossCheck.STEADY  # a source, not a plume swung over it
-        frame, upflow = self._frame, self._declaration.check_upflow_m
+        upflow = self._declaration.check_upflow_m
         ax, ay = found.x - upflow * frame.ux, found.y - upflow * frame.uy
         legs = cast_vertices(self.grid, ax, ay, frame, width, 2)
         self._check = _Check(found, frame, 0.5 * upflow)
