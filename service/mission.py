@@ -56,7 +56,7 @@ from service.planning.astar import AStarPlanner
 from service.planning.base import PlanContext, Waypoint
 from service.planning.cast import cast_vertices
 from service.planning.crossflow import FlowFrame
-from service.planning.declaration import Declarer, OdourSample, mass_within, steady_odour
+from service.planning.declaration import Declarer, mass_within, steady_odour
 from service.planning.reach import Reachability
 from service.planning.safety import clamped_cell, safe_plan, segment_clear
 from service.planning.zigzag import sweeps_upflow_first, young_plume_lead, zigzag_vertices
@@ -217,7 +217,7 @@ class Mission:
         self._paused_sweep: tuple[tuple[Waypoint, ...], int] | None = None  # (pattern, index) at contact
         self._contact_hits = 0  # detections since the sweep was paused
         self._pass_probe: tuple[int, Waypoint] | None = None  # (estimate, point) of probe_to_pass
-        self._recent: deque[OdourSample] = deque()  # the last ticks, for steady_odour
+        self._recent: deque[Observation] = deque()  # the last ticks, for steady_odour
         self._first_odour_s: float | None = None  # the mission's first detection (this run)
 
     @classmethod
@@ -289,7 +289,7 @@ class Mission:
         d = self._declaration
         if d.steady_hit_rate <= 0.0:
             return
-        self._recent.append(OdourSample(obs.time_s, obs.x, obs.y, obs.detected, obs.flow_x, obs.flow_y))
+        self._recent.append(obs)
         keep_s = max(d.steady_window_s, d.steady_turn_window_s)
         while self._recent and self._recent[0].time_s <= obs.time_s - keep_s:
             self._recent.popleft()

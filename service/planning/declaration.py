@@ -69,6 +69,7 @@ if TYPE_CHECKING:
     from service.config import DeclarationConfig
     from service.grid import Grid
     from service.mapping.belief import FloatArray
+    from service.observation import Observation
 
 
 @dataclass(frozen=True)
@@ -90,21 +91,8 @@ class Declaration:
             raise ValueError("a declaration names at least one rule")
 
 
-@dataclass(frozen=True)
-class OdourSample:
-    """One tick as ``steady_odour`` needs it: where the vehicle was, whether it smelled odour, and
-    the flow it measured (m/s)."""
-
-    time_s: float
-    x: float
-    y: float
-    detected: bool
-    flow_x: float
-    flow_y: float
-
-
 def steady_odour(
-    samples: Sequence[OdourSample],
+    samples: Sequence[Observation],
     x: float,
     y: float,
     first_odour_s: float | None,
@@ -117,8 +105,8 @@ def steady_odour(
     the first and last of those at least ``steady_min_span_s`` apart;
     the mission's first odour came at least ``steady_min_contact_s`` ago; and the flow of the last
     ``steady_turn_window_s`` has turned, on average, no more than ``steady_max_turn_deg`` from
-    ``flow_direction`` (the mean flow, a unit vector). ``samples`` are in time order, the newest
-    last (this tick). Always False with ``steady_hit_rate`` 0."""
+    ``flow_direction`` (the mean flow, a unit vector). ``samples`` are the mission's ticks in time
+    order, the newest last (this tick). Always False with ``steady_hit_rate`` 0."""
     c = config
     if c.steady_hit_rate <= 0.0 or not samples or first_odour_s is None:
         return False

@@ -5,7 +5,8 @@ import pytest
 
 from service.config import DeclarationConfig, DeclarationRule
 from service.grid import Grid
-from service.planning.declaration import Declarer, OdourSample, mass_within, steady_odour
+from service.observation import Observation
+from service.planning.declaration import Declarer, mass_within, steady_odour
 
 G = Grid(0.0, 5.0, 0.0, 5.0, columns=5, rows=5)  # 1 m cells
 
@@ -185,9 +186,9 @@ def test_admit_ignores_a_rule_for_a_refused_cell() -> None:
     assert found.cell == 12
 
 
-def odour_record(hits: list[bool], x: float = 0.0) -> list[OdourSample]:
+def odour_record(hits: list[bool], x: float = 0.0) -> list[Observation]:
     """One tick a second at (x, 0) under a flow East, odour as ``hits`` says."""
-    return [OdourSample(float(t), x, 0.0, hit, 1.0, 0.0) for t, hit in enumerate(hits)]
+    return [Observation(float(t), x, 0.0, 1.0, 0.0, hit) for t, hit in enumerate(hits)]
 
 
 STEADY = DeclarationConfig(steady_hit_rate=0.75)
