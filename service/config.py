@@ -149,6 +149,10 @@ class PlanningConfig(_Section):
     """Plume lost with this share of the map within ``declaration.radius_m`` of the estimate: go
     on tracing toward the estimate instead of casting (0: always cast; surge-cast always casts)."""
     lost_after_s: float = Field(default=20.0, gt=0)
+    flat_map_ratio: float = Field(default=0.0, ge=0)
+    """A map whose most likely cell holds less than this many times a uniform map's share has no
+    evidence left of where the source is: a cast that ends with such a map sweeps again instead of
+    heading for the map's estimate, an arbitrary cell (0: off; surge-cast never sweeps again)."""
     lone_contact_hits: int = Field(default=0, ge=0, le=1000)
     """A contact the sweep met with at most this many detections, then lost for
     ``lone_contact_lost_after_s``, goes back to the sweep where it stopped instead of casting

@@ -13,6 +13,8 @@ tracing, and source declaration". The states:
 - ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate.
 - ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
   last detection (``planning.cast``), then the planner again. A detection returns to ``TRACE``.
+  With ``flat_map_ratio`` > 0, a cast that ends with a map holding no evidence (no cell above that
+  many times a uniform map's share) goes back to ``FIND``: a new sweep from where the vehicle is.
   With ``lone_contact_hits`` > 0, a contact the sweep met with at most that many detections is
   lost after ``lone_contact_lost_after_s`` instead, and goes back to ``FIND``, on along the sweep
   from where it stopped: a false alarm (the detector's, or a stray puff) is not worth a cast,
@@ -546,7 +548,25 @@ class Mission:
         if self._check is not None or self._map_knows_the_plume():
             return self._trace(ctx)
         wanted = self._follow_pattern(ctx)
-        return wanted if wanted is not None else self._trace(ctx)
+        if wanted is not None:
+            return wanted
+        if self._map_is_flat():
+            # the cast is over and the map holds no evidence: its estimate is merely the first of
+            # nearly equal cells, so look for the plume again as before the first detection
+            self._enter(MissionState.FIND)
+            self._sweep_frame = None
+            return self._find(ctx)
+        return self._trace(ctx)
+
+    def _map_is_flat(self) -> bool:
+        """Whether no cell holds ``flat_map_ratio`` times a uniform map's share (always False with
+        the ratio 0, and for the map-free baseline)."""
+        ratio = self.planning.flat_map_ratio
+        if ratio <= 0.0 or not self.planner.steers_by_map:
+            return False
+        likelihood = self.mapper.likelihood
+        total = float(likelihood.sum())
+        return total > 0.0 and float(likelihood.max()) * likelihood.size < ratio * total
 
     def _map_knows_the_plume(self) -> bool:
         """Whether the estimate holds ``lost_trace_mass`` of the map (within the declaration

@@ -468,6 +468,44 @@ def test_a_lost_plume_is_traced_on_while_the_estimate_holds_the_map(
 
 
 @pytest.mark.parametrize(
+    ("peak", "ratio", "method", "sweeps"),
+    [
+        (None, 2.0, "astar", True),  # a uniform map: its estimate is merely the first cell
+        (0.00375, 2.0, "astar", True),  # 1.5 times the uniform share (1 / 400): no evidence
+        (0.00375, 0.0, "astar", False),  # off
+        (0.01, 2.0, "astar", False),  # 4 times: the map knows something, on toward its estimate
+        (None, 2.0, "surge-cast", False),  # the map-free baseline never sweeps again
+    ],
+)
+def test_a_cast_that_ends_with_a_flat_map_sweeps_again(
+    peak: float | None, ratio: float, method: str, sweeps: bool
+) -> None:
+    mapper = ScriptedMapper(AREA)
+    if peak is None:
+        mapper.set(np.ones(AREA.shape))
+    else:
+        mapper.peak_at(SOURCE, peak)
+    planning = PlanningConfig(
+        method=PlanningMethod(method), lost_after_s=10.0, cast_legs=0, flat_map_ratio=ratio
+    )
+    mission = Mission(AREA, mapper, planning, NEVER)
+    flow = (1.0, 0.0)
+    v = VehicleState(50.0, 10.0)
+    mission.step(Observation(4.0, v.x, v.y, *flow, False), v)
+    mission.step(Observation(5.0, v.x, v.y, *flow, True), v)
+    mission.step(Observation(6.0, v.x, v.y, *flow, True), v)  # two hits: not a lone contact
+    out = mission.step(Observation(16.0, v.x, v.y, *flow, False), v)  # lost; no cast legs
+    assert PlumeLost(16.0, v.x, v.y, 6.0) in out.events
+    if sweeps:  # a new sweep from here: upflow (West), first across the flow to the far side (South)
+        assert out.state is MissionState.FIND
+        assert out.waypoints is not None
+        assert out.waypoints[0] == Waypoint(50.0, AREA.y_centres[0])
+    else:  # on as it was going: the same waypoints, so none are sent again
+        assert out.state is MissionState.LOST
+        assert out.waypoints is None
+
+
+@pytest.mark.parametrize(
     ("lone_contact_hits", "hits", "sweeps_on"), [(0, 1, False), (1, 1, True), (1, 2, False)]
 )
 def test_a_lone_detection_from_the_sweep_resumes_the_sweep(
