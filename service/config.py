@@ -138,7 +138,10 @@ class PlanningConfig(_Section):
     zigzag_diagonal_start: bool = False
     """The first zigzag leg advances a spacing along the flow instead of crossing at the start's line."""
     zigzag_downflow_near_edge: bool = False
-    """A start less than one zigzag spacing from the upflow edge sweeps downflow first."""
+    """A start less than ``zigzag_near_edge_spacings`` zigzag spacings from the upflow edge sweeps
+    downflow first."""
+    zigzag_near_edge_spacings: float = Field(default=1.0, gt=0, le=10)
+    """How near the upflow edge, in zigzag spacings, ``zigzag_downflow_near_edge`` applies."""
     zigzag_young_plume_s: float = Field(default=0.0, ge=0, le=3600)
     """For a plume released since the mission began: the mission's first upflow sweep first runs
     upflow so that its first leg can meet a plume that young (``planning.zigzag.young_plume_lead``,

@@ -6,10 +6,10 @@ tracing, and source declaration". The states:
 - ``FIND`` (published as ``search``): no detection yet; a zigzag sweep across the flow
   (``planning.zigzag``), sweeping back the other way when it reaches the edge of the area, laid
   out anew when the mean flow over the mapper's history turns by more than 45 degrees. It goes
-  upflow first, or with ``zigzag_downflow_near_edge`` downflow from a start less than a spacing
-  from the upflow edge. With ``zigzag_young_plume_s`` > 0 (a release begun with the mission) the
-  first upflow sweep first runs upflow, so that its first leg crosses where the young plume
-  already reaches (``zigzag.young_plume_lead``).
+  upflow first, or with ``zigzag_downflow_near_edge`` downflow from a start less than
+  ``zigzag_near_edge_spacings`` spacings from the upflow edge. With ``zigzag_young_plume_s`` > 0
+  (a release begun with the mission) the first upflow sweep first runs upflow, so that its first
+  leg crosses where the young plume already reaches (``zigzag.young_plume_lead``).
 - ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate.
 - ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
   last detection (``planning.cast``), then the planner again. A detection returns to ``TRACE``.
@@ -417,8 +417,9 @@ class Mission:
     def _find(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
         frame = self._frame or FlowFrame(1.0, 0.0)
         if self._sweep_frame is None and self.planning.zigzag_downflow_near_edge:
-            v, spacing = ctx.vehicle, self.planning.zigzag_spacing_m
-            self._sweep_upflow = sweeps_upflow_first(self.grid, v.x, v.y, frame, spacing)
+            v, p = ctx.vehicle, self.planning
+            near_m = p.zigzag_near_edge_spacings * p.zigzag_spacing_m
+            self._sweep_upflow = sweeps_upflow_first(self.grid, v.x, v.y, frame, near_m)
         if self._sweep_frame is None or frame.angle_to(self._sweep_frame) > SWEEP_REDRAW_RAD:
             self._lay_sweep(ctx, frame)
         wanted = self._follow_pattern(ctx)

@@ -23,17 +23,19 @@ if TYPE_CHECKING:
     from service.grid import Grid
 
 
-def sweeps_upflow_first(grid: Grid, x: float, y: float, frame: FlowFrame, spacing_m: float) -> bool:
+def sweeps_upflow_first(grid: Grid, x: float, y: float, frame: FlowFrame, near_m: float) -> bool:
     """Whether a sweep from (x, y) should go upflow first: not when the start is less than
-    ``spacing_m`` from the upflow edge of the area.
+    ``near_m`` from the upflow edge of the area (the mission passes a multiple of the spacing).
 
-    From there the upflow sweep is a single leg to the edge, and nearly all of the area where
-    the source could be, the whole area between the start and the downflow edge, lies behind
-    the vehicle; it would be swept only after the vehicle has turned at the edge, while the
-    downflow sweep reaches it from its first leg on.
+    From a start within a spacing of the edge the upflow sweep is a single leg to the edge, and
+    nearly all of the area where the source could be, the whole area between the start and the
+    downflow edge, lies behind the vehicle; it would be swept only after the vehicle has turned
+    at the edge, while the downflow sweep reaches it from its first leg on. Within one and a
+    half spacings it is not much better: its last leg runs less than half a spacing from the
+    edge, so the sweep crosses the band beside the edge again and again before it turns.
     """
     lo, _ = along_range(grid, frame)
-    return frame.along(x, y) - lo >= spacing_m
+    return frame.along(x, y) - lo >= near_m
 
 
 def young_plume_lead(

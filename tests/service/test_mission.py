@@ -547,9 +547,12 @@ def test_a_lone_detection_from_the_sweep_resumes_the_sweep(
 
 
 def test_a_start_near_the_upflow_edge_sweeps_downflow_first() -> None:
-    def first_leg(start_x: float, near_edge: bool) -> Waypoint:
+    def first_leg(start_x: float, near_edge: bool, spacings: float = 1.0) -> Waypoint:
         planning = PlanningConfig(
-            zigzag_spacing_m=30.0, zigzag_diagonal_start=True, zigzag_downflow_near_edge=near_edge
+            zigzag_spacing_m=30.0,
+            zigzag_diagonal_start=True,
+            zigzag_downflow_near_edge=near_edge,
+            zigzag_near_edge_spacings=spacings,
         )
         mission = Mission(AREA, ScriptedMapper(AREA), planning, NEVER)
         v = VehicleState(start_x, 10.0)
@@ -563,6 +566,10 @@ def test_a_start_near_the_upflow_edge_sweeps_downflow_first() -> None:
     # a spacing or more from the edge, the sweep goes upflow either way
     assert first_leg(47.5, True) == first_leg(47.5, False)
     assert first_leg(47.5, True).x == pytest.approx(17.5)
+    # "near" can be set in spacings: 37.5 m from the edge is within 1.5 (45 m), not within 1.25
+    assert first_leg(40.0, True, 1.5).x == pytest.approx(70.0)
+    assert first_leg(40.0, True, 1.25).x == pytest.approx(10.0)
+    assert first_leg(40.0, False, 1.5) == first_leg(40.0, True, 1.25)
 
 
 def test_the_first_sweep_leads_upflow_for_a_young_plume() -> None:

@@ -173,6 +173,8 @@ def test_a_start_near_the_upflow_edge_sweeps_downflow_first() -> None:
     north = FlowFrame.from_flow(0.0, 2.0)
     assert not sweeps_upflow_first(PAPER, 50.0, -40.0, north, 10.0)
     assert sweeps_upflow_first(PAPER, 50.0, -30.0, north, 10.0)
+    # "near" is a distance: 45 m takes in a start 40 m from the edge that 30 m leaves out
+    assert not sweeps_upflow_first(PAPER, edge + 40.0, 0.0, east, 45.0)
 
 
 def test_young_plume_lead_reaches_the_upflow_edge() -> None:
