@@ -29,6 +29,7 @@ from service.grid import Grid
 from sim_bridge.autopilot import AUTOPILOTS, VehicleKind
 from sim_bridge.detector import BinaryDetector, DetectorParams
 from sim_bridge.flow import FlowField, MeanderingFlow, SwitchedFlow, TurbulentFlow, UniformFlow
+from sim_bridge.flow_sensor import FlowSensor, FlowSensorParams
 from sim_bridge.plume import PuffParams, PuffPlume
 from sim_bridge.vehicle import VehicleParams, VehicleState
 from sim_bridge.world import World
@@ -113,6 +114,9 @@ class PlumeSpec(_Spec):
     spin_up_s: float = Field(default=0.0, ge=0, le=3600)
     """The source has been releasing for this long when the mission starts (0: it starts with the
     mission, the plume still empty). The flow's clock runs through the spin-up too."""
+    spin_up_step_s: float | None = Field(default=None, gt=0, le=2.0)
+    """Integration step of the spin-up (default: world.dt_s). A coarser step keeps long spin-ups
+    cheap: a puff's random walk is exact at any step, its advection an Euler step of the flow."""
 
 
 class VehicleSpec(_Spec):
@@ -124,6 +128,8 @@ class VehicleSpec(_Spec):
     speed_mps: float = Field(default=1.0, gt=0, le=50)
     max_turn_rate_dps: float = Field(default=90.0, gt=0)
     pivot_angle_deg: float = Field(default=60.0, gt=0, le=180)
+    slows_to_turn: bool = False
+    """AUV kinematics: no turning on the spot (set pivot_angle_deg = 180), slower in turns."""
 
     @model_validator(mode="after")
     def _one_of(self) -> Self:
@@ -140,6 +146,13 @@ class DetectorSpec(_Spec):
     hold_s: float = Field(default=1.0, gt=0)
 
 
+class FlowSensorSpec(_Spec):
+    noise_std_mps: float = Field(default=0.0, ge=0)
+    """White noise on each component of every flow reading, m/s."""
+    bias_deg: float = Field(default=0.0, ge=-180, le=180)
+    """Every flow reading turned by this angle (counter-clockwise), degrees."""
+
+
 class WorldSpec(_Spec):
     seed: int = Field(default=0, ge=0)
     """Seed used when none is given on the command line."""
@@ -149,6 +162,7 @@ class WorldSpec(_Spec):
     plume: PlumeSpec = Field(default_factory=PlumeSpec)
     vehicle: VehicleSpec
     detector: DetectorSpec = Field(default_factory=DetectorSpec)
+    flow_sensor: FlowSensorSpec = Field(default_factory=FlowSensorSpec)
     random_margin_m: float = Field(default=10.0, ge=0)
     """Random positions keep this far from the area's edges."""
     random_min_separation_m: float = Field(default=30.0, ge=0)
@@ -368,9 +382,10 @@ def place(scenario: Scenario, seed: int | None = None) -> Placement:
 
 
 def _streams(scenario: Scenario, seed: int | None) -> list[np.random.Generator]:
-    # independent child streams: placement, flow, plume, detector; changing one leaves the others alone
+    # independent child streams: placement, flow, plume, detector, flow sensor; changing one leaves
+    # the others alone (and a stream added at the end leaves the earlier ones as they were)
     root = np.random.default_rng(scenario.world.seed if seed is None else seed)
-    return root.spawn(4)
+    return root.spawn(5)
 
 
 def _resolve(scenario: Scenario, rng: np.random.Generator) -> Placement:
@@ -404,7 +419,7 @@ def _resolve(scenario: Scenario, rng: np.random.Generator) -> Placement:
 
 def build_world(scenario: Scenario, seed: int | None = None) -> World:
     """A fresh world for ``scenario``; the same seed gives the same placements, flow and plume."""
-    placement_rng, flow_rng, plume_rng, detector_rng = _streams(scenario, seed)
+    placement_rng, flow_rng, plume_rng, detector_rng, sensor_rng = _streams(scenario, seed)
     placement = _resolve(scenario, placement_rng)
     world, grid, config = scenario.world, scenario.grid, scenario.config
     p = world.plume
@@ -433,9 +448,10 @@ def build_world(scenario: Scenario, seed: int | None = None) -> World:
     v = world.vehicle
     flow = _flow(world.flow, placement.mean_flow_mps, flow_rng)
     plume = PuffPlume(placement.source_m, puff_params, bounds, plume_rng)
-    for _ in range(round(p.spin_up_s / world.dt_s)):
-        plume.step(world.dt_s, flow)
-        flow.advance(world.dt_s)
+    spin_up_step = p.spin_up_step_s or world.dt_s
+    for _ in range(round(p.spin_up_s / spin_up_step)):
+        plume.step(spin_up_step, flow)
+        flow.advance(spin_up_step)
     return World(
         flow=flow,
         plume=plume,
@@ -444,8 +460,14 @@ def build_world(scenario: Scenario, seed: int | None = None) -> World:
             x_m=placement.start_m[0], y_m=placement.start_m[1], heading_rad=math.radians(90.0 - v.heading_deg)
         ),
         vehicle_params=VehicleParams(
-            speed_mps=v.speed_mps, max_turn_rate_dps=v.max_turn_rate_dps, pivot_angle_deg=v.pivot_angle_deg
+            speed_mps=v.speed_mps,
+            max_turn_rate_dps=v.max_turn_rate_dps,
+            pivot_angle_deg=v.pivot_angle_deg,
+            slows_to_turn=v.slows_to_turn,
         ),
         obstacles=grid.obstacles,
         dt_s=world.dt_s,
+        flow_sensor=FlowSensor(
+            FlowSensorParams(world.flow_sensor.noise_std_mps, world.flow_sensor.bias_deg), sensor_rng
+        ),
     )

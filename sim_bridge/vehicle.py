@@ -5,6 +5,9 @@ heading theta = atan2(Y_t - Y_c, X_t - X_c) (eq. 10, taken with the quadrant-cor
 turning by at most ``max_turn_rate_dps`` to cancel the heading error epsilon = phi - theta.
 Like an ArduPilot rover (WP_PIVOT_ANGLE), it turns on the spot when the error exceeds
 ``pivot_angle_deg``; without that a target inside the turning circle would be orbited forever.
+An AUV cannot turn on the spot: it keeps way on and slows in a turn instead (``slows_to_turn``:
+surge speed scaled by the cosine of the heading error, at least a quarter of cruise), which keeps
+its turning circle small enough to reach a waypoint beside it.
 Obstacles block motion: a step that would enter one slides along it or stops.
 
 Headings are in the map frame: radians counter-clockwise from East (x).
@@ -20,6 +23,9 @@ import numpy as np
 from service.errors import ConfigError
 from service.grid import Rectangle
 
+_LEAST_TURN_SPEED = 0.25
+"""The least share of cruise speed an AUV keeps in a turn (it needs way on to steer)."""
+
 
 @dataclass(frozen=True)
 class VehicleParams:
@@ -29,6 +35,8 @@ class VehicleParams:
     """Turn-rate limit, degrees per second."""
     pivot_angle_deg: float = 60.0
     """Heading errors above this are turned on the spot (ArduPilot Rover's WP_PIVOT_ANGLE)."""
+    slows_to_turn: bool = False
+    """AUV-like: surge speed x max(cos(heading error), 1/4) instead of full speed."""
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.speed_mps) and self.speed_mps > 0):
@@ -100,6 +108,8 @@ def step(
     if abs(error) > math.radians(params.pivot_angle_deg):
         return replace(still, heading_rad=heading)
     reach = params.speed_mps * dt_s
+    if params.slows_to_turn:
+        reach *= max(math.cos(error), _LEAST_TURN_SPEED)
     if distance <= reach:
         moves = [(target_m[0], target_m[1])]
     else:

@@ -13,6 +13,7 @@ from service.grid import Rectangle
 from sim_bridge import vehicle as kinematics
 from sim_bridge.detector import BinaryDetector
 from sim_bridge.flow import FlowField, velocity_at
+from sim_bridge.flow_sensor import FlowSensor, FlowSensorParams
 from sim_bridge.plume import PuffPlume
 from sim_bridge.vehicle import VehicleParams, VehicleState
 
@@ -30,6 +31,7 @@ class World:
         vehicle_params: VehicleParams,
         obstacles: tuple[Rectangle, ...] = (),
         dt_s: float = 0.1,
+        flow_sensor: FlowSensor | None = None,
     ) -> None:
         if not (math.isfinite(dt_s) and dt_s > 0):
             raise ValueError(f"dt_s must be positive and finite, got {dt_s}")
@@ -40,6 +42,7 @@ class World:
         self.vehicle_params = vehicle_params
         self.obstacles = obstacles
         self.dt_s = dt_s
+        self.flow_sensor = flow_sensor or FlowSensor(FlowSensorParams())
         self.target_m: tuple[float, float] | None = None
         """Where the vehicle is driving to; None: stay put."""
         self.driving = False
@@ -71,7 +74,11 @@ class World:
             self.step()
 
     def flow_at_vehicle(self) -> tuple[float, float]:
-        """Flow (u_x East, u_y North), m/s toward, at the vehicle."""
+        """Flow (u_x East, u_y North), m/s toward, at the vehicle, as its flow sensor reports it."""
+        return self.flow_sensor.read(*self.true_flow_at_vehicle())
+
+    def true_flow_at_vehicle(self) -> tuple[float, float]:
+        """The flow that really moves the plume at the vehicle (no sensor error)."""
         return velocity_at(self.flow, self.vehicle.x_m, self.vehicle.y_m)
 
     def concentration_at_vehicle(self) -> float:

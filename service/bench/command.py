@@ -7,7 +7,8 @@ import dataclasses
 import json
 from typing import Any
 
-from service.bench import mapping, search
+from service.bench import mapping, search, suite
+from service.bench.progress import progress_bar
 from sim_bridge.scenarios import load_scenario
 
 
@@ -74,6 +75,27 @@ def add_parser(subparsers: Any, name: str) -> None:
         "with --set declaration.* it measures what the guards against wrong declarations cost",
     )
 
+    w = kinds.add_parser(
+        "suite", help="every world class of a suite with one service configuration: the worst class counts"
+    )
+    w.add_argument(
+        "--suite", default=None, metavar="DIR", help="directory of class files (default config/suites)"
+    )
+    w.add_argument("--class", dest="classes", action="append", metavar="NAME",
+                   help="run only this class (repeatable; default: every class)")  # fmt: skip
+    w.add_argument("--runs", type=_at_least(1), default=20, help="missions per class (default 20)")
+    w.add_argument("--first-seed", type=_at_least(0), default=0,
+                   help="seeds K..K+N-1 (default 0); choose below 10000, report from 10000 up")  # fmt: skip
+    w.add_argument(
+        "--config", default=None, metavar="FILE", help="service configuration (default config/default.toml)"
+    )
+    w.add_argument("--set", action="append", default=[], dest="overrides", metavar="KEY=VALUE",
+                   help="override a service key for every class (e.g. mapping.method=bayes)")  # fmt: skip
+    w.add_argument("--jobs", type=int, default=None, help="worker processes (default: the cores)")
+    w.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the missions on this Dask scheduler (pip install -e '.[cluster]')")  # fmt: skip
+    w.add_argument("--json", action="store_true", help="one JSON object per class, then a summary object")
+
     p = kinds.add_parser("plume", help="filament plume model: steps per second at a puff count")
     p.add_argument("--puffs", type=int, default=10_000, help="live puffs at steady state (default 10000)")
     p.add_argument("--json", action="store_true", help="one JSON object")
@@ -84,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_mapping(args)
     if args.bench == "search":
         return _run_search(args)
+    if args.bench == "suite":
+        return _run_suite(args)
     if args.bench == "plume":
         return _run_plume(args)
     raise AssertionError(args.bench)
@@ -136,10 +160,13 @@ def _run_search(args: argparse.Namespace) -> int:
         )
     summaries = []
     results: dict[tuple[str, str], list[search.MissionResult]] = {}
-    for summary, batch in search.run_configurations(
-        args.scenario, mappers, planners, args.runs, jobs=args.jobs, max_time_s=args.max_time,
-        overrides=args.overrides, first_seed=args.first_seed, oracle=args.oracle_declaration,
-    ):  # fmt: skip
+    with progress_bar(args.runs * len(mappers) * len(planners), quiet=args.json) as progress:
+        configurations = list(search.run_configurations(
+            args.scenario, mappers, planners, args.runs, jobs=args.jobs, max_time_s=args.max_time,
+            overrides=args.overrides, first_seed=args.first_seed, oracle=args.oracle_declaration,
+            progress=progress,
+        ))  # fmt: skip
+    for summary, batch in configurations:
         summaries.append(summary)
         results[summary.mapper, summary.planner] = batch
         if args.json:
@@ -189,4 +216,35 @@ def _run_plume(args: argparse.Namespace) -> int:
             f"{result.steps_per_s:.0f} steps/s, real-time factor {result.real_time_factor:.1f} "
             f"(slowest repeat {result.worst_real_time_factor:.1f})"
         )
+    return 0
+
+
+def _run_suite(args: argparse.Namespace) -> int:
+    files = suite.suite_classes(args.suite)
+    if args.classes:
+        known = {path.stem: path for path in files}
+        unknown = [name for name in args.classes if name not in known]
+        if unknown:
+            raise SystemExit(f"oslim bench suite: unknown class {unknown[0]!r}; known: {', '.join(known)}")
+        files = [known[name] for name in dict.fromkeys(args.classes)]
+    if not args.json:
+        print(
+            f"suite {args.suite or 'config/suites'}: {len(files)} classes x {args.runs} missions (seeds "
+            f"{args.first_seed}..{args.first_seed + args.runs - 1}), configuration "
+            f"{args.config or 'config/default.toml'}{''.join(f' --set {o}' for o in args.overrides)}; "
+            "times: median / p90 to a correct declaration",
+            flush=True,
+        )
+        print(suite.HEADER, flush=True)
+    with progress_bar(args.runs * len(files), quiet=args.json) as progress:
+        for row in suite.timed(
+            suite.run_suite(
+                files, args.runs, first_seed=args.first_seed, config_path=args.config,
+                overrides=args.overrides, jobs=args.jobs, scheduler=args.scheduler, progress=progress,
+            )
+        ):  # fmt: skip
+            if args.json:
+                print(json.dumps(row.as_row()), flush=True)
+            else:
+                print(row.line(), flush=True)
     return 0

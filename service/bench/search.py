@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -402,11 +402,13 @@ def run_configurations(
     overrides: Sequence[str] = (),
     first_seed: int = 0,
     oracle: bool = False,
+    progress: Callable[[int], None] = lambda _: None,
 ) -> Iterable[tuple[SearchSummary, list[MissionResult]]]:
     """Every mapper x planner configuration over seeds first_seed..first_seed+runs-1 (a second
     set of seeds checks that a setting chosen on the first did not just fit those missions), in a
     pool of ``jobs`` processes (default: the cores); yields each configuration's summary as soon
-    as its runs are done. ``oracle``: every mission with the perfect declaration guard (``run_mission``)."""
+    as its runs are done. ``oracle``: every mission with the perfect declaration guard (``run_mission``).
+    ``progress`` is told of every mission done."""
     if runs < 1:
         raise ValueError("runs must be >= 1")
     if first_seed < 0:
@@ -419,14 +421,20 @@ def run_configurations(
         for m, p in configs
         for seed in range(first_seed, first_seed + runs)
     ]
+
+    def counted(results: Iterable[MissionResult]) -> Iterable[MissionResult]:
+        for result in results:
+            progress(1)
+            yield result
+
     if workers == 1:
-        results = map(run_spec, specs)
+        results = iter(counted(map(run_spec, specs)))
         for m, p in configs:
             batch = [next(results) for _ in range(runs)]
             yield summarise(scenario, m, p, batch, max_time_s), batch
         return
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        mapped = pool.map(run_spec, specs, chunksize=1)
+        mapped = iter(counted(pool.map(run_spec, specs, chunksize=1)))
         for m, p in configs:
             batch = [next(mapped) for _ in range(runs)]
             yield summarise(scenario, m, p, batch, max_time_s), batch
