@@ -5,6 +5,8 @@ import asyncio
 import json
 import socket
 import struct
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -156,3 +158,19 @@ def test_a_client_watches_a_simulated_mission_live(tmp_path: Path) -> None:
     assert scenario.grid.x_min <= pose.pose.position.x <= scenario.grid.x_max
     with socket.socket() as sock:  # the service stopped its server with the mission
         assert sock.connect_ex(("127.0.0.1", port)) != 0
+
+
+def test_the_view_is_off_by_default_and_its_key_is_checked_with_the_configuration() -> None:
+    assert build_config({}).foxglove.listen == ""
+    assert build_config({}, ['foxglove.listen="[::1]:8765"']).foxglove.listen == "[::1]:8765"
+    for bad in ('"nohost"', '"127.0.0.1:70000"', "8765"):
+        with pytest.raises(ConfigError, match=r"foxglove\.listen"):
+            build_config({}, [f"foxglove.listen={bad}"])
+    with pytest.raises(ConfigError, match=r"foxglove\.port: unknown key"):
+        build_config({"foxglove": {"port": 8765}})
+
+
+def test_the_service_does_not_load_the_sdk_or_matplotlib_while_the_view_is_off() -> None:
+    code = "import sys, service.app; print('foxglove' in sys.modules, 'matplotlib' in sys.modules)"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert result.stdout.split() == ["False", "False"]
