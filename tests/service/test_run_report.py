@@ -13,6 +13,7 @@ from service.grid import Grid
 from service.mapping import mapper_from_config
 from service.observation import Observation
 from service.recorder import Recorder
+from service.replay import replay
 from service.run_report import DPI, FIGSIZE_IN, ReportError, read_run
 
 CONFIG = build_config({}, ["mapping.method=hmm", "area.columns=30", "area.rows=20", "vehicle.id=r1"])
@@ -67,6 +68,12 @@ def test_the_run_is_read_back_from_its_recording(tmp_path: Path) -> None:
     assert run.likelihood is not None
     assert run.likelihood.shape == (20, 30)
     assert np.isclose(run.likelihood.sum(), 1.0, atol=1e-4)
+
+
+def test_the_drawable_channels_leave_replay_bit_for_bit(tmp_path: Path) -> None:
+    report = replay(record(tmp_path))
+    assert report.ok, report.summary()
+    assert report.grids_compared == 100
 
 
 def test_oslim_report_writes_a_png_of_the_expected_size(
