@@ -13,7 +13,8 @@ from typing import TextIO
 
 
 class TerminalProgress:
-    """``progress.update(count)`` as often as convenient; ``progress.close()`` at the end."""
+    """``progress.update(n)`` when ``n`` more units are done (as tqdm's ``update``, so a tqdm bar
+    can stand in for it); ``progress.close()`` at the end."""
 
     def __init__(
         self,
@@ -32,14 +33,16 @@ class TerminalProgress:
         self._started = time.monotonic()
         self._shown = self._started  # a command done within interval_s shows nothing
         self._width = 0
+        self.count = 0
 
-    def update(self, count: int) -> None:
-        """Show ``count`` units done (throttled to one write per ``interval_s``)."""
+    def update(self, n: int = 1) -> None:
+        """Count ``n`` more units done; show the total (at most one write per ``interval_s``)."""
+        self.count += n
         now = time.monotonic()
         if not self.enabled or now - self._shown < self.interval_s:
             return
         self._shown = now
-        line = f"{self.label}: {count} {self.unit}, {now - self._started:.0f} s"
+        line = f"{self.label}: {self.count} {self.unit}, {now - self._started:.0f} s"
         self.stream.write("\r" + line.ljust(self._width))
         self.stream.flush()
         self._width = len(line)

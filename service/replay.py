@@ -97,7 +97,7 @@ class ReplayReport:
 
 def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> ReplayReport:
     """Replay the recording at ``path`` and compare every recorded map and estimate;
-    ``progress(ticks)`` is called after every message, if given."""
+    ``progress(1)`` is called after every replayed tick, if given."""
     reader = RecordingReader(path)
     session = _Session()
     messages = reader.messages()
@@ -108,9 +108,10 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
             break
         except (McapError, CRCValidationError, struct.error, KeyError) as exc:
             raise ReplayError(f"{path}: unreadable MCAP: {exc}") from None
+        ticks = session.ticks
         session.consume(message)
-        if progress is not None:
-            progress(session.ticks)
+        if progress is not None and session.ticks > ticks:
+            progress(session.ticks - ticks)
     return ReplayReport(
         path=str(path),
         ticks=session.ticks,

@@ -14,7 +14,7 @@ def test_a_terminal_sees_the_count_and_a_clean_line_at_the_end() -> None:
     out = Terminal()
     progress = TerminalProgress("replay run.mcap", "ticks", stream=out, interval_s=0.0)
     progress.update(3)
-    progress.update(40)
+    progress.update(37)
     assert "replay run.mcap: 40 ticks" in out.getvalue()
     progress.close()
     assert out.getvalue().endswith("\r")
