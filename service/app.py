@@ -35,6 +35,8 @@ from typing import Any
 import numpy as np
 
 from service.config import Config, load_config
+from service.foxglove_live import open_live_view
+from service.foxglove_scene import SceneBuilder
 from service.gate import CommandGate, GateState
 from service.grid import Grid
 from service.mapping import mapper_from_config
@@ -147,6 +149,10 @@ class Service:
             origin=(config.mavlink.origin[0], config.mavlink.origin[1]) if config.mavlink.origin else None,
         )
         self.stats = ServiceStats()
+        self.scene = SceneBuilder(
+            min(self.grid.cell_width_m, self.grid.cell_height_m), config.declaration.radius_m
+        )
+        """The Foxglove-drawable messages of each tick (recorded, and live with ``foxglove.listen``)."""
         self.target: Waypoint | None = None
         self.declared: SourceDeclared | None = None
         self.started = asyncio.Event()
@@ -206,7 +212,10 @@ class Service:
             link_edge as link,
             ZenohLink.from_config(cfg, self.grid) as zenoh_link,
         ):
-            with Recorder(cfg) as recorder:  # last: no run file for a service that did not start
+            with (
+                open_live_view(cfg.foxglove.listen) as live,
+                Recorder(cfg, mirror=live) as recorder,  # last: no run file for a service that did not start
+            ):
                 self._recorder = recorder
                 self.stats.mcap = str(recorder.path)
                 self._zenoh, self._link = zenoh_link, link
@@ -360,6 +369,10 @@ class Service:
                 log.error("zenoh publish failed: %s", exc)
         if self._recorder is not None:
             self._recorder.tick(obs, slim, plume, estimate=out.estimate, state=state, path=path)
+            scene = self.scene.tick(
+                obs, self._heading_rad, estimate=out.estimate, state=state, path=path, events=out.events
+            )
+            self._recorder.write_messages(scene)
 
     def _note_link(self, link: MavlinkLink) -> None:
         """Copy the link's counters of input it threw away; one log line when their total grows

@@ -18,6 +18,7 @@ COMMANDS: dict[str, str] = {
     "stub": "sim_bridge.stub_command",
     "sitl-bridge": "sim_bridge.sitl_bridge_command",
     "replay": "service.replay",
+    "report": "service.run_report",
 }
 
 

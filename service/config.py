@@ -247,6 +247,18 @@ class RecorderConfig(_Section):
     dir: str = Field(default="runs", min_length=1)
 
 
+class FoxgloveConfig(_Section):
+    listen: str = Field(default="", pattern=r"^$|^(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.\-]+):[0-9]{1,5}$")
+    """``host:port`` of the live Foxglove WebSocket server (``foxglove_live``); empty: off."""
+
+    @field_validator("listen")
+    @classmethod
+    def _port(cls, value: str) -> str:
+        if value and not 0 <= int(value.rsplit(":", 1)[1]) <= 65535:
+            raise ValueError("port must be 0..65535 (0: any free port)")
+        return value
+
+
 class ServiceConfig(_Section):
     snapshot_path: str = ""
     """Map state written atomically every tick and restored at start-up; empty: no snapshot."""
@@ -262,6 +274,7 @@ class Config(_Section):
     declaration: DeclarationConfig = Field(default_factory=DeclarationConfig)
     zenoh: ZenohConfig = Field(default_factory=ZenohConfig)
     recorder: RecorderConfig = Field(default_factory=RecorderConfig)
+    foxglove: FoxgloveConfig = Field(default_factory=FoxgloveConfig)
     service: ServiceConfig = Field(default_factory=ServiceConfig)
 
 

@@ -13,6 +13,11 @@ knows which maps follow which observation):
 | ``/oslim/path``     | json                       | ``zenoh_link.path_json`` (optional per tick)        |
 | ``/oslim/setpoint`` | json                       | ``{time_s, x, y, z}`` guided target, map frame      |
 | ``/oslim/event``    | json                       | ``{time_s, name, text, ...}`` state changes etc.    |
+| ``foxglove_scene``  | protobuf foxglove.*        | vehicle, track, plan, detections, markers, tf,      |
+|                     |                            | ``/sim/source`` (``write_messages``, per tick)      |
+
+With ``mirror`` (a ``foxglove_live.LiveView``) every channel and message also goes to the live
+Foxglove view, byte for byte.
 
 Crash safety: the file is chunked (zstd) and every ``tick`` / ``write_*`` call closes its chunk
 and flushes it to the OS, so a crash, SIGKILL or SIGTERM leaves every completed call readable
@@ -48,6 +53,7 @@ from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import build_file_descriptor_set
 
 from service.errors import ConfigError
+from service.foxglove_scene import SCHEMAS as SCENE_SCHEMAS
 from service.grid import Grid
 from service.grid_message import DEFAULT_FRAME_ID, SCHEMA_NAME, grid_payload
 from service.messages import (
@@ -61,6 +67,7 @@ from service.messages import (
 
 if TYPE_CHECKING:
     from service.config import Config
+    from service.foxglove_live import LiveView
     from service.mapping.mapper import Estimate
     from service.observation import Observation
 
@@ -173,8 +180,10 @@ class Recorder:
         clock_ns: Callable[[], int] = time.time_ns,
         frame_id: str = DEFAULT_FRAME_ID,
         compression: CompressionType = CompressionType.ZSTD,
+        mirror: LiveView | None = None,
     ) -> None:
         self.config = config
+        self._mirror = mirror
         self.grid = Grid.from_config(config.area)
         self.directory = Path(directory if directory is not None else config.recorder.dir)
         self.frame_id = frame_id
@@ -274,6 +283,13 @@ class Recorder:
         """Record an event (``plume_found``, ``source_declared``, ...) with JSON-able details."""
         return self._write_json(EVENT_TOPIC, {"time_s": float(time_s), "name": name, "text": text, **detail})
 
+    def write_messages(self, records: Sequence[tuple[str, bytes]]) -> bool:
+        """Record serialised messages on ``foxglove_scene`` topics, numbered as the last tick."""
+        with self._lock:
+            if self._writer is None:
+                return False
+            return self._write(records, self.ticks)
+
     def _write_json(self, topic: str, value: dict[str, Any]) -> bool:
         payload = json_payload(value)
         with self._lock:
@@ -295,7 +311,10 @@ class Recorder:
 
     def _start(self, started_ns: int) -> None:
         assert self._file is not None  # set by __enter__ just before
-        writer = Writer(self._file, compression=self._compression)
+        if self._mirror is None:
+            writer = Writer(self._file, compression=self._compression)
+        else:
+            writer = self._mirror.tee(self._file, compression=self._compression)
         writer.start(profile="", library=_LIBRARY)
         grid_schema = writer.register_schema(
             name=SCHEMA_NAME,
@@ -315,6 +334,13 @@ class Recorder:
                 name=str(schema["title"]), encoding="jsonschema", data=json.dumps(schema).encode()
             )
             self._channels[topic] = writer.register_channel(topic, "json", schema_id)
+        scene_schemas: dict[str, int] = {}
+        for topic, message_type in SCENE_SCHEMAS.items():
+            name = message_type.DESCRIPTOR.full_name
+            if name not in scene_schemas:
+                data = build_file_descriptor_set(message_type).SerializeToString()
+                scene_schemas[name] = writer.register_schema(name=name, encoding="protobuf", data=data)
+            self._channels[topic] = writer.register_channel(topic, "protobuf", scene_schemas[name])
         writer.add_metadata(
             "oslim",
             {

@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import struct
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -27,6 +28,7 @@ from service.grid import Grid
 from service.grid_message import decode_grid
 from service.mapping import mapper_from_config
 from service.messages import observation_from_json
+from service.progress import TerminalProgress
 from service.recorder import (
     CONFIG_TOPIC,
     ESTIMATE_TOPIC,
@@ -93,8 +95,9 @@ class ReplayReport:
         return "\n".join(lines)
 
 
-def replay(path: str | Path) -> ReplayReport:
-    """Replay the recording at ``path`` and compare every recorded map and estimate."""
+def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> ReplayReport:
+    """Replay the recording at ``path`` and compare every recorded map and estimate;
+    ``progress(1)`` is called after every replayed tick, if given."""
     reader = RecordingReader(path)
     session = _Session()
     messages = reader.messages()
@@ -105,7 +108,10 @@ def replay(path: str | Path) -> ReplayReport:
             break
         except (McapError, CRCValidationError, struct.error, KeyError) as exc:
             raise ReplayError(f"{path}: unreadable MCAP: {exc}") from None
+        ticks = session.ticks
         session.consume(message)
+        if progress is not None and session.ticks > ticks:
+            progress(session.ticks - ticks)
     return ReplayReport(
         path=str(path),
         ticks=session.ticks,
@@ -228,7 +234,11 @@ def run(args: argparse.Namespace) -> int:
     path: Path = args.file
     if not path.is_file():
         raise ReplayError(f"{path}: no such file")
-    report = replay(path)
+    bar = TerminalProgress(f"replay {path.name}", "ticks", enabled=not args.json)
+    try:
+        report = replay(path, bar.update)
+    finally:
+        bar.close()
     if args.json:
         fields = {k: v for k, v in asdict(report).items() if k != "mismatches"}
         print(json.dumps({**fields, "ok": report.ok, "mismatches": len(report.mismatches)}))

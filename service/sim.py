@@ -156,6 +156,7 @@ async def closed_loop(
     mav_port, zenoh_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_STREAM)
     config = loopback_config(scenario.config, mav_port, zenoh_port, recorder_dir)
     service = Service(config, clock=Clock(speed))
+    service.scene.source = world.plume.source_m  # recorded as /sim/source, drawn by `oslim report`
     stop = asyncio.Event()
     options = StubOptions(url=f"udpout:127.0.0.1:{mav_port}", speed=speed, sensor_name=config.sensor.name)
     async with VehicleStub(world, options) as stub:
@@ -278,10 +279,13 @@ def add_parser(subparsers: Any, name: str) -> None:
         "--recorder-dir", default=None, help="where the run's MCAP goes (default: recorder.dir)"
     )
     parser.add_argument("--no-probe", action="store_true", help="skip the Zenoh subscriber process")
+    parser.add_argument("--foxglove", type=int, metavar="PORT", help="live Foxglove view on 127.0.0.1:PORT")
+    parser.add_argument("--report", metavar="FILE.png", help="draw the run at the end (oslim report)")
 
 
 def run(args: argparse.Namespace) -> int:
-    scenario = load_scenario(args.scenario, args.set)
+    live = [f'foxglove.listen="127.0.0.1:{args.foxglove}"'] if args.foxglove is not None else []
+    scenario = load_scenario(args.scenario, [*args.set, *live])
     started = time.perf_counter()
     result, _stats, perf = asyncio.run(
         run_mission(
@@ -296,4 +300,8 @@ def run(args: argparse.Namespace) -> int:
     perf["wall_s"] = round(time.perf_counter() - started, 2)
     print("performance: " + json.dumps(perf), file=sys.stderr, flush=True)
     print(json.dumps(asdict(result)), flush=True)
+    if args.report is not None and result.mcap is not None:
+        from service.run_report import write_report
+
+        write_report(result.mcap, args.report)
     return 0 if result.found else 1

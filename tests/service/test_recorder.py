@@ -17,6 +17,8 @@ from mcap_protobuf.decoder import DecoderFactory
 
 from service.config import Config, build_config
 from service.errors import ConfigError
+from service.foxglove_scene import SCHEMAS as SCENE_SCHEMAS
+from service.foxglove_scene import VEHICLE_TOPIC, SceneBuilder
 from service.grid_message import decode_grid
 from service.mapping.mapper import Estimate
 from service.observation import Observation
@@ -131,10 +133,17 @@ def test_the_mcap_reader_sees_the_channels_and_schemas_foxglove_needs(tmp_path: 
         assert summary is not None
         channels = {c.topic: c for c in summary.channels.values()}
         assert set(channels) == {CONFIG_TOPIC, OBS_TOPIC, SLIM_TOPIC, PLUME_TOPIC, ESTIMATE_TOPIC, PATH_TOPIC,
-                                 SETPOINT_TOPIC, EVENT_TOPIC}  # fmt: skip
+                                 SETPOINT_TOPIC, EVENT_TOPIC, *SCENE_SCHEMAS}  # fmt: skip
         for topic, channel in channels.items():
             schema = summary.schemas[channel.schema_id]
-            if topic in (SLIM_TOPIC, PLUME_TOPIC):
+            if topic in SCENE_SCHEMAS:
+                name = SCENE_SCHEMAS[topic].DESCRIPTOR.full_name
+                assert name.startswith("foxglove.")
+                encodings = (channel.message_encoding, schema.encoding, schema.name)
+                assert encodings == ("protobuf", "protobuf", name)
+                files = {f.name for f in FileDescriptorSet.FromString(schema.data).file}
+                assert f"foxglove/{name.removeprefix('foxglove.')}.proto" in files
+            elif topic in (SLIM_TOPIC, PLUME_TOPIC):
                 assert (channel.message_encoding, schema.encoding, schema.name) == (
                     "protobuf", "protobuf", "foxglove.Grid"
                 )  # fmt: skip
@@ -300,3 +309,28 @@ def test_a_killed_recording_keeps_every_flushed_tick_and_replays(tmp_path: Path)
     assert not report.complete
     assert report.ticks == len(recorded)
     assert report.grids_compared >= 2 * (flushed + 1)
+
+
+def test_the_drawable_messages_decode_through_their_recorded_schemas(tmp_path: Path) -> None:
+    scene = SceneBuilder(cell_m=1.0, declared_radius_m=3.0, source=(5.0, 6.0))
+    with Recorder(CONFIG, directory=tmp_path, clock_ns=clock) as rec:
+        for k in range(3):
+            estimate = Estimate(cell=k + 1, x=1.5, y=-2.5, probability=0.25, entropy=2.0)
+            slim, plume = maps_of(k)
+            assert rec.tick(obs_of(k), slim, plume, estimate=estimate, state="trace")
+            records = scene.tick(obs_of(k), 0.5, estimate=estimate, state="trace", path=[(2.0, 3.0)])
+            assert rec.write_messages(records)
+    assert rec.path is not None
+    with open(rec.path, "rb") as file:
+        reader = make_reader(file, decoder_factories=[DecoderFactory()])
+        messages = reader.iter_decoded_messages(topics=list(SCENE_SCHEMAS))
+        decoded = [(channel.topic, proto) for _, channel, _, proto in messages]
+    counts: dict[str, int] = {}
+    for topic, proto in decoded:
+        counts[topic] = counts.get(topic, 0) + 1
+        if topic in SCENE_SCHEMAS:
+            assert proto.DESCRIPTOR.full_name == SCENE_SCHEMAS[topic].DESCRIPTOR.full_name
+    assert all(counts[topic] == 3 for topic in SCENE_SCHEMAS)
+    poses = [proto for topic, proto in decoded if topic == VEHICLE_TOPIC]
+    assert (poses[2].pose.position.x, poses[2].pose.position.y) == (obs_of(2).x, obs_of(2).y)
+    assert poses[2].frame_id == "map"

@@ -147,3 +147,12 @@ def test_a_recording_without_grids_does_not_pass(tmp_path: Path, capsys: pytest.
 
 def test_a_missing_file_is_an_error(tmp_path: Path) -> None:
     assert main(["replay", str(tmp_path / "nope.mcap")]) == 2
+
+
+def test_replay_counts_every_tick_it_replays(tmp_path: Path) -> None:
+    """The progress callback (a line on a terminal) hears of each replayed tick once."""
+    path = record(tmp_path, config_for("hmm"))
+    done: list[int] = []
+    report = replay(path, done.append)
+    assert done == [1] * report.ticks
+    assert report.ticks == TICKS

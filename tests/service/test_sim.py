@@ -29,7 +29,7 @@ def test_declares_the_wang_laminar_source(tmp_path: Path) -> None:
 def test_cli_prints_one_json_line_and_exit_status(tmp_path: Path) -> None:
     proc = subprocess.run(
         [sys.executable, "-m", "service.cli", "sim", "--scenario", "wang-laminar", "--seed", "1",
-         "--speed", "20", "--recorder-dir", str(tmp_path)],
+         "--speed", "20", "--recorder-dir", str(tmp_path), "--report", str(tmp_path / "run.png")],
         capture_output=True, text=True, timeout=240, check=False,
     )  # fmt: skip
     last = proc.stdout.strip().splitlines()[-1]
@@ -49,3 +49,4 @@ def test_cli_prints_one_json_line_and_exit_status(tmp_path: Path) -> None:
     assert proc.returncode == (0 if result["found"] else 1)
     assert "performance:" in proc.stderr
     assert Path(result["mcap"]).exists()
+    assert (tmp_path / "run.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # --report drew the run
