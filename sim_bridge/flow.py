@@ -151,10 +151,12 @@ class MeanderingFlow(_Clocked):
         x = np.asarray(x_m, dtype=float)
         y = np.asarray(y_m, dtype=float)
         # stream function psi = sum_k (a_k/|kappa_k|) sin(kappa_k . p + phi_k): u = d psi/dy, v = -d psi/dx
-        phase = (
-            np.multiply.outer(x, self._kappa[:, 0]) + np.multiply.outer(y, self._kappa[:, 1]) + self._phase
-        )
-        weight = np.cos(phase) * self._amplitude
+        # (in place: the plume asks this for every puff at every step)
+        weight = np.multiply.outer(x, self._kappa[:, 0])
+        weight += np.multiply.outer(y, self._kappa[:, 1])
+        weight += self._phase
+        np.cos(weight, out=weight)
+        weight *= self._amplitude
         u = self._mean[0] + self._uniform[0] + weight @ self._normal[:, 0]
         v = self._mean[1] + self._uniform[1] + weight @ self._normal[:, 1]
         return np.asarray(u, dtype=float), np.asarray(v, dtype=float)
