@@ -1,4 +1,5 @@
-"""Progress of a long benchmark on a terminal: missions done of total, rate, time left.
+"""Progress of a long command on a terminal (``oslim bench``, ``oslim replay``): done of total,
+rate, time left.
 
 Silent when standard error is not a terminal or the output is JSON, so logs and pipes get only
 the results.
@@ -15,11 +16,19 @@ from tqdm import tqdm
 
 @contextmanager
 def progress_bar(
-    total: int, *, unit: str = "mission", quiet: bool = False
+    total: int | None,
+    *,
+    unit: str = "mission",
+    desc: str | None = None,
+    quiet: bool = False,
+    min_interval_s: float = 0.1,
 ) -> Iterator[Callable[[int], None]]:
-    """A callable told how many more are done; a bar on stderr only when it is a terminal."""
+    """A callable told how many more are done; a bar on stderr only when it is a terminal
+    (``total`` None: a count and a rate, no time left)."""
     if quiet or not sys.stderr.isatty():
         yield lambda _: None
         return
-    with tqdm(total=total, unit=unit, file=sys.stderr, dynamic_ncols=True, leave=False) as bar:
+    bar = tqdm(total=total, unit=unit, desc=desc, file=sys.stderr, dynamic_ncols=True, leave=False,
+               mininterval=min_interval_s)  # fmt: skip
+    with bar:
         yield bar.update

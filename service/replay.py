@@ -28,7 +28,7 @@ from service.grid import Grid
 from service.grid_message import decode_grid
 from service.mapping import mapper_from_config
 from service.messages import observation_from_json
-from service.progress import TerminalProgress
+from service.progress import progress_bar
 from service.recorder import (
     CONFIG_TOPIC,
     ESTIMATE_TOPIC,
@@ -234,11 +234,8 @@ def run(args: argparse.Namespace) -> int:
     path: Path = args.file
     if not path.is_file():
         raise ReplayError(f"{path}: no such file")
-    bar = TerminalProgress(f"replay {path.name}", "ticks", enabled=not args.json)
-    try:
-        report = replay(path, bar.update)
-    finally:
-        bar.close()
+    with progress_bar(None, unit="tick", desc=f"replay {path.name}", quiet=args.json) as progress:
+        report = replay(path, progress)
     if args.json:
         fields = {k: v for k, v in asdict(report).items() if k != "mismatches"}
         print(json.dumps({**fields, "ok": report.ok, "mismatches": len(report.mismatches)}))

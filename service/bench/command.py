@@ -8,7 +8,7 @@ import json
 from typing import Any
 
 from service.bench import mapping, search, suite
-from service.bench.progress import progress_bar
+from service.progress import progress_bar
 from sim_bridge.scenarios import load_scenario
 
 
@@ -227,6 +227,7 @@ def _run_suite(args: argparse.Namespace) -> int:
         if unknown:
             raise SystemExit(f"oslim bench suite: unknown class {unknown[0]!r}; known: {', '.join(known)}")
         files = [known[name] for name in dict.fromkeys(args.classes)]
+    suite.service_config(args.config, tuple(args.overrides))  # a broken configuration stops here
     if not args.json:
         print(
             f"suite {args.suite or 'config/suites'}: {len(files)} classes x {args.runs} missions (seeds "

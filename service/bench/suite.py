@@ -67,13 +67,14 @@ def _world_class(path: str) -> WorldClass:
 
 
 @lru_cache(maxsize=8)
-def _config(path: str | None, overrides: tuple[str, ...]) -> Config:
+def service_config(path: str | None, overrides: tuple[str, ...]) -> Config:
+    """The service configuration every class runs with (read once per process)."""
     return load_config(path, overrides)
 
 
 def run_suite_mission(spec: SuiteMission) -> tuple[MissionResult, float]:
     """The mission and its time limit (a worker's task)."""
-    config = _config(spec.config_path, spec.overrides)
+    config = service_config(spec.config_path, spec.overrides)
     drawn = draw_scenario(_world_class(spec.class_path), spec.seed, config)
     return run_mission(drawn.scenario, spec.seed, max_time_s=drawn.time_limit_s), drawn.time_limit_s
 
@@ -234,7 +235,7 @@ def run_suite(
     None runs them in ``jobs`` local processes (default: the cores)."""
     if runs < 1:
         raise ValueError("runs must be >= 1")
-    _config(config_path, tuple(overrides))  # a broken configuration fails here, once
+    service_config(config_path, tuple(overrides))  # a broken configuration fails here, once
     classes = [_world_class(str(path)) for path in class_files]
     specs = [
         SuiteMission(c.origin, seed, config_path, tuple(overrides))
@@ -242,7 +243,7 @@ def run_suite(
         for seed in range(first_seed, first_seed + runs)
     ]
     for c in classes:  # every class can draw its first world with this configuration
-        draw_scenario(c, first_seed, _config(config_path, tuple(overrides)))
+        draw_scenario(c, first_seed, service_config(config_path, tuple(overrides)))
     if scheduler is not None:
         outcomes = _dask(specs, scheduler, progress)
     else:

@@ -1,8 +1,13 @@
-"""Progress lines appear on a terminal only."""
+"""Progress bars appear on a terminal only."""
+
+from __future__ import annotations
 
 import io
+import sys
 
-from service.progress import TerminalProgress
+import pytest
+
+from service.progress import progress_bar
 
 
 class Terminal(io.StringIO):
@@ -10,19 +15,29 @@ class Terminal(io.StringIO):
         return True
 
 
-def test_a_terminal_sees_the_count_and_a_clean_line_at_the_end() -> None:
+def test_a_terminal_sees_the_count_the_rate_and_the_total(monkeypatch: pytest.MonkeyPatch) -> None:
     out = Terminal()
-    progress = TerminalProgress("replay run.mcap", "ticks", stream=out, interval_s=0.0)
-    progress.update(3)
-    progress.update(37)
-    assert "replay run.mcap: 40 ticks" in out.getvalue()
-    progress.close()
-    assert out.getvalue().endswith("\r")
+    monkeypatch.setattr(sys, "stderr", out)
+    with progress_bar(40, desc="suite", min_interval_s=0.0) as progress:
+        progress(3)
+        progress(37)
+    assert "40/40" in out.getvalue()
+    assert "suite" in out.getvalue()
 
 
-def test_a_pipe_or_json_output_sees_nothing() -> None:
-    for stream, enabled in ((io.StringIO(), True), (Terminal(), False)):
-        progress = TerminalProgress("replay", "ticks", stream=stream, enabled=enabled, interval_s=0.0)
-        progress.update(5)
-        progress.close()
-        assert stream.getvalue() == ""
+def test_without_a_total_the_count_is_shown(monkeypatch: pytest.MonkeyPatch) -> None:
+    out = Terminal()
+    monkeypatch.setattr(sys, "stderr", out)
+    with progress_bar(None, unit="tick", desc="replay run.mcap", min_interval_s=0.0) as progress:
+        progress(12)
+    assert "12tick" in out.getvalue().replace(" ", "")
+
+
+@pytest.mark.parametrize(("stream", "quiet"), [(io.StringIO(), False), (Terminal(), True)])
+def test_a_pipe_or_json_output_sees_nothing(
+    monkeypatch: pytest.MonkeyPatch, stream: io.StringIO, quiet: bool
+) -> None:
+    monkeypatch.setattr(sys, "stderr", stream)
+    with progress_bar(5, quiet=quiet) as progress:
+        progress(5)
+    assert stream.getvalue() == ""
