@@ -100,6 +100,7 @@ class MappingMethod(StrEnum):
     HMM = "hmm"
     BAYES = "bayes"
     POMDP = "pomdp"
+    INTERMITTENT = "intermittent"
 
 
 class MappingConfig(_Section):
@@ -110,6 +111,7 @@ class MappingConfig(_Section):
     drift_spread: float = Field(default=0.0, ge=0)
     forgetting: float = Field(default=0.0, ge=0, lt=1)
     zero_lag: bool = True
+    prehistory: bool = False
     epsilon_d: float = Field(default=0.2, gt=0, lt=1)
     epsilon_c: float = Field(default=0.02, gt=0, lt=1)
     tick_s: float = Field(default=1.0, gt=0, le=60)

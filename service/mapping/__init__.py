@@ -6,6 +6,7 @@ from typing import TYPE_CHECKING
 
 from service.mapping.bayes import BayesMapper
 from service.mapping.hmm import HmmMapper
+from service.mapping.intermittent import IntermittentMapper
 from service.mapping.mapper import Estimate, MapperParams, SourceMapper
 from service.mapping.pomdp import PomdpMapper
 
@@ -17,11 +18,12 @@ MAPPERS: dict[str, type[SourceMapper]] = {
     HmmMapper.name: HmmMapper,
     BayesMapper.name: BayesMapper,
     PomdpMapper.name: PomdpMapper,
+    IntermittentMapper.name: IntermittentMapper,
 }
 
 
 def make_mapper(method: str, grid: Grid, params: MapperParams | None = None) -> SourceMapper:
-    """The mapper registered under ``method`` (``hmm``, ``bayes``, ``pomdp``)."""
+    """The mapper registered under ``method`` (``hmm``, ``bayes``, ``pomdp``, ``intermittent``)."""
     try:
         cls = MAPPERS[method]
     except KeyError:

@@ -25,6 +25,14 @@ across the flow, the std of the speed along it). The spread of eq. 4 per axis th
 The error is taken as fully correlated over the lag (a meander persists), hence linear in tau
 rather than the random walk's sqrt(tau); the axes stay independent, so p_ij stays separable.
 
+A release older than the service (ours): a source has usually been releasing long before the
+vehicle arrives, and the flow before the first tick is unknown, not absent. Counting only the
+releases since the service started would let a plume reach only as far downflow as the flow has
+run since then (20 m after 20 s at 1 m/s), so an early detection would put the source next to the
+vehicle. ``prehistory`` therefore continues the record back in time with the mean step of the
+record (its mean flow), until the oldest release has drifted ``reach_m`` (the area's diagonal:
+every source in the area is in reach) or ``MAX_RELEASES`` release times are counted.
+
 Release times are one per flow-history entry: the filament released at the start of the newest
 entry has lag dt_newest and drift (dx, dy)_newest, the one before it the cumulative sums of the
 two newest entries, and so on back through the window. Rows of every stacked array below are
@@ -33,6 +41,7 @@ ordered newest release first (shortest lag first).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
@@ -46,13 +55,37 @@ if TYPE_CHECKING:
     from service.mapping.mapper import FlowStep
 
 
-def release_offsets(history: Iterable[FlowStep]) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Lag t_k - t_l (s) and drift V(t_l, t_k) (m, x and y) of each release time, newest first."""
+MAX_RELEASES = 600
+"""Most release times a prehistory extends the record to (bounds the work per tick)."""
+
+
+def release_offsets(
+    history: Iterable[FlowStep], reach_m: float = 0.0
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Lag t_k - t_l (s) and drift V(t_l, t_k) (m, x and y) of each release time, newest first;
+    with ``reach_m`` > 0 the record is continued with its mean step (the prehistory) until the
+    oldest release has drifted that far."""
     steps = list(history)[::-1]
     dt = np.fromiter((s.dt_s for s in steps), dtype=float, count=len(steps))
     dx = np.fromiter((s.dx_m for s in steps), dtype=float, count=len(steps))
     dy = np.fromiter((s.dy_m for s in steps), dtype=float, count=len(steps))
-    return np.cumsum(dt), np.cumsum(dx), np.cumsum(dy)
+    lag, drift_x, drift_y = np.cumsum(dt), np.cumsum(dx), np.cumsum(dy)
+    if reach_m <= 0.0 or not steps:
+        return lag, drift_x, drift_y
+    step_m = math.hypot(float(dx.mean()), float(dy.mean()))
+    reached_m = math.hypot(float(drift_x[-1]), float(drift_y[-1]))
+    if step_m <= 0.0 or reached_m >= reach_m:
+        return lag, drift_x, drift_y
+    extra = min(math.ceil((reach_m - reached_m) / step_m), MAX_RELEASES - len(steps))
+    if extra <= 0:
+        return lag, drift_x, drift_y
+    # the prehistory: before the record, the record's mean step, again and again
+    k = np.arange(1, extra + 1, dtype=float)
+    return (
+        np.concatenate([lag, lag[-1] + k * dt.mean()]),
+        np.concatenate([drift_x, drift_x[-1] + k * dx.mean()]),
+        np.concatenate([drift_y, drift_y[-1] + k * dy.mean()]),
+    )
 
 
 def flow_spread(history: Iterable[FlowStep]) -> tuple[float, float]:
@@ -129,12 +162,13 @@ def history_factors(
     *,
     zero_lag: bool = False,
     drift_spread: float = 0.0,
+    reach_m: float = 0.0,
 ) -> tuple[FloatArray, FloatArray]:
     """``filament_factors`` for flat cell ``cell`` over every release time in ``history``; with
     ``zero_lag`` also the release of this very tick (lag 0, still at its source: the first row);
-    ``drift_spread`` is k of eq. D1 (0: the papers' model)."""
+    ``drift_spread`` is k of eq. D1 (0: the papers' model); ``reach_m`` > 0 adds the prehistory."""
     steps = list(history)
-    lag, drift_x, drift_y = release_offsets(steps)
+    lag, drift_x, drift_y = release_offsets(steps, reach_m)
     sd_x, sd_y = flow_spread(steps) if drift_spread > 0.0 else (0.0, 0.0)
     if zero_lag:
         # a continuous source has odour at its own position now; the papers' releases stop at the

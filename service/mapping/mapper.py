@@ -9,6 +9,7 @@ the source map by the method's own rule (``_assimilate``).
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections import deque
 from dataclasses import dataclass
@@ -57,6 +58,10 @@ class MapperParams:
     papers' models). A plume narrower than a cell, or intermittent, can leave a vehicle in a
     cell it crosses dry; without a floor one such non-detection all but rules out every source
     whose filaments the model puts there (Bayesian and POMDP mappers)."""
+    prehistory: bool = False
+    """The release began before the service: continue the flow record back with its mean step
+    until every source in the area is in reach (``filament.release_offsets``; Bayesian and POMDP
+    mappers; False: the papers' releases since the first tick only)."""
     epsilon_d: float = 0.2
     """HMM pi adaptation gain on a detection (seed hmm-plume-mapping §IV-B1)."""
     epsilon_c: float = 0.02
@@ -91,6 +96,7 @@ class MapperParams:
             false_alarm=s.false_alarm_probability,
             miss_floor=s.miss_floor,
             zero_lag=m.zero_lag,
+            prehistory=m.prehistory,
             epsilon_d=m.epsilon_d,
             epsilon_c=m.epsilon_c,
             tick_s=m.tick_s,
@@ -133,6 +139,7 @@ class SourceMapper(ABC):
         self._last_time: float | None = None
         self.history: deque[FlowStep] = deque(maxlen=self.params.window)
         self.ignored: dict[str, int] = {}
+        self._reach_m = math.hypot(grid.x_max - grid.x_min, grid.y_max - grid.y_min)
 
     @property
     def likelihood(self) -> FloatArray:
@@ -258,6 +265,7 @@ class ObservationModelMapper(SourceMapper):
             p.sigma_y,
             zero_lag=p.zero_lag,
             drift_spread=p.drift_spread,
+            reach_m=self._reach_m if p.prehistory else 0.0,
         )
 
     @abstractmethod
