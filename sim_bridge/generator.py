@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+import zlib
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,6 +51,13 @@ DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "config" / "default.to
 
 GENERATOR_STREAM = 7
 """Spawn key of the generator's own random stream: apart from build_world's streams (0-4)."""
+
+
+def _class_key(name: str) -> int:
+    """A stable number for a class name, so that the same seed draws unrelated worlds in different
+    classes (otherwise every class would share its sources and starts, and a hard geometry would
+    fail every class at once)."""
+    return zlib.crc32(name.encode("utf-8"))
 
 
 def _as_range(value: Any) -> Any:
@@ -343,7 +351,8 @@ def draw_scenario(world_class: WorldClass, seed: int, config: Config | None = No
     (default: config/default.toml) with the class's area, the drawn obstacles and the GUIDED mode
     of the drawn vehicle."""
     base = config if config is not None else build_config(tomllib.loads(DEFAULT_CONFIG.read_text("utf-8")))
-    draw = _Draw(np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(GENERATOR_STREAM,))))
+    stream = np.random.SeedSequence([seed, _class_key(world_class.name)], spawn_key=(GENERATOR_STREAM,))
+    draw = _Draw(np.random.default_rng(stream))
     spec = world_class.world
     area = {**base.area.model_dump(), **world_class.area, "obstacles": []}
     grid = Grid.from_config(base.area.model_validate(area))
