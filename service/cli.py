@@ -8,16 +8,16 @@ import logging
 import sys
 from collections.abc import Sequence
 
-from service.errors import OslimError
+from service.core.errors import OslimError
 
 # sub-command name -> module exposing add_parser(subparsers) and run(args) -> int
 COMMANDS: dict[str, str] = {
-    "bench": "service.bench.command",
-    "serve": "service.app",
-    "sim": "service.sim",
+    "bench": "service.tools.bench.command",
+    "serve": "service.app.service",
+    "sim": "service.tools.sim",
     "stub": "sim_bridge.stub_command",
     "sitl-bridge": "sim_bridge.sitl_bridge_command",
-    "replay": "service.replay",
+    "replay": "service.tools.replay",
 }
 
 

@@ -1,14 +1,14 @@
 """Named scenarios: one TOML file each under ``config/scenarios/``.
 
 A scenario file holds the service's configuration tables (``[area]``, ``[sensor]``,
-``[mapping]``...), validated by ``service.config.build_config``, plus a ``[world]`` table that
+``[mapping]``...), validated by ``service.core.config.build_config``, plus a ``[world]`` table that
 describes the world the service does not know: the source, the flow model, the plume, the
 vehicle and the detector. ``load_scenario`` validates both (unknown keys, wrong types and
 out-of-range values raise ``ConfigError`` naming the key); ``build_world`` turns a scenario and
 a seed into a ``World``, drawing the random placements from that seed.
 
 Positions are ``position_m = [x, y]`` in the map frame, ``cell = [i, j]`` in the papers'
-numbering (column i from the west, row j from the NORTH, see ``service.grid``), or ``"random"``.
+numbering (column i from the west, row j from the NORTH, see ``service.core.grid``), or ``"random"``.
 """
 
 from __future__ import annotations
@@ -23,9 +23,9 @@ from typing import Annotated, Any, Literal, Self
 import numpy as np
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
 
-from service.config import Config, apply_override, build_config, parse_override
-from service.errors import ConfigError
-from service.grid import Grid
+from service.core.config import Config, apply_override, build_config, parse_override
+from service.core.errors import ConfigError
+from service.core.grid import Grid
 from sim_bridge.autopilot import AUTOPILOTS, VehicleKind
 from sim_bridge.detector import BinaryDetector, DetectorParams
 from sim_bridge.flow import FlowField, MeanderingFlow, SwitchedFlow, TurbulentFlow, UniformFlow

@@ -11,8 +11,8 @@ import signal
 from pathlib import Path
 from typing import Any
 
-from service.config import Config
-from service.errors import ConfigError
+from service.core.config import Config
+from service.core.errors import ConfigError
 from sim_bridge.scenarios import add_world_arguments, build_world, load_scenario
 from sim_bridge.sitl_bridge import MAV_COMP_ID_PERIPHERAL, BridgeOptions, SitlBridge
 

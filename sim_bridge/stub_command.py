@@ -9,7 +9,7 @@ import logging
 import signal
 from typing import Any
 
-from service.signing import load_signing_key
+from service.edges.signing import load_signing_key
 from sim_bridge.scenarios import add_world_arguments, build_world, load_scenario
 from sim_bridge.stub import DEFAULT_RATES_HZ, Stream, StubOptions, VehicleStub
 

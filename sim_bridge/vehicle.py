@@ -17,8 +17,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from service.errors import ConfigError
-from service.grid import Rectangle
+from service.core.errors import ConfigError
+from service.core.grid import Rectangle
 
 
 @dataclass(frozen=True)

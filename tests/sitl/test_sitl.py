@@ -14,9 +14,9 @@ from typing import Any
 
 import pytest
 
-from service.app import Service
-from service.config import Config, load_config
-from service.sim import within_one_cell
+from service.app.service import Service
+from service.core.config import Config, load_config
+from service.tools.sim import within_one_cell
 from sim_bridge.scenarios import build_world, load_scenario
 from sim_bridge.sitl_bridge import BridgeOptions, SitlBridge
 

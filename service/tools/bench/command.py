@@ -1,0 +1,192 @@
+"""``oslim bench``: rerunnable benchmarks that print what they measured."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+from typing import Any
+
+from service.tools.bench import mapping, search
+from sim_bridge.scenarios import load_scenario
+
+
+def _at_least(minimum: int) -> Any:
+    """An argparse type: an integer of at least ``minimum``, or a usage error naming the bound."""
+
+    def parse(text: str) -> int:
+        value = int(text)
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
+        return value
+
+    parse.__name__ = "integer"  # argparse names the type in "invalid integer value"
+    return parse
+
+
+def add_parser(subparsers: Any, name: str) -> None:
+    parser = subparsers.add_parser(name, help="benchmarks (mapping speed and memory, ...)")
+    kinds = parser.add_subparsers(dest="bench", required=True, metavar="BENCH")
+    m = kinds.add_parser("mapping", help="time per tick and peak memory of each mapper")
+    m.add_argument("--json", action="store_true", help="one JSON object per line")
+    m.add_argument("--mapper", action="append", dest="mappers", help="mapper(s) to run (default: all)")
+    m.add_argument(
+        "--cells", type=int, action="append", choices=sorted(mapping.GRID_SHAPES), help="grid size(s)"
+    )
+    m.add_argument("--window", type=int, default=200, help="flow-history window, ticks (default 200)")
+    m.add_argument("--ticks", type=int, default=None, help="timed ticks per configuration")
+
+    s = kinds.add_parser("search", help="seeded closed-loop missions: success rate and time to the source")
+    s.add_argument("--scenario", required=True, help="scenario name (config/scenarios) or TOML path")
+    s.add_argument(
+        "--mapper", action="append", dest="mappers", help="mapper (repeat, or 'all'; default: the scenario's)"
+    )
+    s.add_argument(
+        "--planner",
+        action="append",
+        dest="planners",
+        help="planner (repeat, or 'all'; default: the scenario's)",
+    )
+    s.add_argument(
+        "--runs", type=_at_least(1), default=20, help="missions per configuration, seeds 0..N-1 (default 20)"
+    )
+    s.add_argument(
+        "--first-seed",
+        type=_at_least(0),
+        default=0,
+        help="start the seeds here: K..K+N-1 (default 0; another set checks a tuned setting)",
+    )
+    s.add_argument("--jobs", type=int, default=None, help="worker processes (default: the cores)")
+    s.add_argument(
+        "--max-time",
+        type=float,
+        default=search.DEFAULT_MAX_TIME_S,
+        help="mission time limit, s (default 300)",
+    )
+    s.add_argument("--set", action="append", default=[], dest="overrides", metavar="KEY=VALUE",
+                   help="override a scenario key (e.g. declaration.probability=0.9)")  # fmt: skip
+    s.add_argument("--json", action="store_true", help="one JSON object per configuration")
+    s.add_argument("--report", metavar="DIR", help="also write report.md and PNG pictures of a mission here")
+    s.add_argument(
+        "--oracle-declaration",
+        action="store_true",
+        help="a bound, not a result: declarations away from the true source are ignored (a perfect guard); "
+        "with --set declaration.* it measures what the guards against wrong declarations cost",
+    )
+
+    p = kinds.add_parser("plume", help="filament plume model: steps per second at a puff count")
+    p.add_argument("--puffs", type=int, default=10_000, help="live puffs at steady state (default 10000)")
+    p.add_argument("--json", action="store_true", help="one JSON object")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.bench == "mapping":
+        return _run_mapping(args)
+    if args.bench == "search":
+        return _run_search(args)
+    if args.bench == "plume":
+        return _run_plume(args)
+    raise AssertionError(args.bench)
+
+
+def _run_mapping(args: argparse.Namespace) -> int:
+    if not args.json:
+        print(
+            f"{'mapper':<8}{'cells':>9}{'window':>8}{'median ms':>11}{'p95 ms':>9}{'peak MB':>9}", flush=True
+        )
+    for result in mapping.run(args.mappers, args.cells, args.window, args.ticks):
+        if args.json:
+            print(json.dumps(mapping.as_row(result)), flush=True)
+        else:
+            print(
+                f"{result.mapper:<8}{result.cells:>9}{result.window:>8}"
+                f"{result.median_ms:>11.2f}{result.p95_ms:>9.2f}{result.peak_mb:>9.1f}",
+                flush=True,
+            )
+    bandwidth = mapping.memory_bandwidth_gb_per_s()
+    if args.json:
+        print(json.dumps({"limit": "memory_bandwidth", "gb_per_s": bandwidth}))
+    else:
+        print(f"memory bandwidth (numpy copy, read + write): {bandwidth:.2f} GB/s")
+    return 0
+
+
+def _fmt(value: float | None, spec: str) -> str:
+    return "never" if value is None else format(value, spec)
+
+
+def _run_search(args: argparse.Namespace) -> int:
+    if args.oracle_declaration and args.report:
+        raise SystemExit("oslim bench search: --oracle-declaration gives a bound, not a result: no --report")
+    scenario = load_scenario(args.scenario, args.overrides)
+    mappers = search.expand(args.mappers, search.mapper_names(), str(scenario.config.mapping.method))
+    planners = search.expand(args.planners, search.planner_names(), str(scenario.config.planning.method))
+    if not args.json:
+        oracle = "; ORACLE declaration (a perfect guard: a bound, not a result)"
+        print(
+            f"{scenario.name}: {args.runs} runs per configuration (seeds {args.first_seed}.."
+            f"{args.first_seed + args.runs - 1}), limit {args.max_time:g} s; "
+            "times: failed runs count as never" + (oracle if args.oracle_declaration else ""),
+            flush=True,
+        )
+        print(
+            f"{'mapper':<7}{'planner':<12}{'runs':>5}{'success':>9}{'median s':>10}{'p90 s':>8}"
+            f"{'path m':>8}{'wrong':>7}{'none':>6}",
+            flush=True,
+        )
+    summaries = []
+    results: dict[tuple[str, str], list[search.MissionResult]] = {}
+    for summary, batch in search.run_configurations(
+        args.scenario, mappers, planners, args.runs, jobs=args.jobs, max_time_s=args.max_time,
+        overrides=args.overrides, first_seed=args.first_seed, oracle=args.oracle_declaration,
+    ):  # fmt: skip
+        summaries.append(summary)
+        results[summary.mapper, summary.planner] = batch
+        if args.json:
+            row = summary.as_row()
+            if args.oracle_declaration:
+                row["oracle_declaration"] = True
+            print(json.dumps(row), flush=True)
+        else:
+            print(
+                f"{summary.mapper:<7}{summary.planner:<12}{summary.runs:>5}{summary.success_rate:>9.1%}"
+                f"{_fmt(summary.median_time_s, '.0f'):>10}{_fmt(summary.p90_time_s, '.0f'):>8}"
+                f"{summary.median_path_m:>8.0f}{summary.wrong_declarations:>7}{summary.undeclared:>6}",
+                flush=True,
+            )
+            if summary.success_rate < 1.0:
+                print(f"  {summary.failure_line()}", flush=True)
+    if args.report:
+        from service.tools.bench import report  # matplotlib is optional: only the report needs it
+
+        best = max(summaries, key=report.rank)
+        written = report.write_report(
+            args.report,
+            args.scenario,
+            summaries,
+            best,
+            results=results[best.mapper, best.planner],
+            overrides=args.overrides,
+            max_time_s=args.max_time,
+            first_seed=args.first_seed,
+        )
+        if not args.json:
+            print(f"report: {written}", flush=True)
+    return 0
+
+
+def _run_plume(args: argparse.Namespace) -> int:
+    from sim_bridge.plume_bench import measure_plume
+
+    result = measure_plume(puffs=args.puffs)
+    row = dataclasses.asdict(result)
+    if args.json:
+        print(json.dumps(row))
+    else:
+        print(
+            f"plume: {result.live_puffs} live puffs, dt {result.dt_s:g} s: "
+            f"{result.median_step_ms:.2f} ms per step, "
+            f"{result.steps_per_s:.0f} steps/s, real-time factor {result.real_time_factor:.1f} "
+            f"(slowest repeat {result.worst_real_time_factor:.1f})"
+        )
+    return 0
