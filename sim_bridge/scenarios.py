@@ -13,7 +13,6 @@ numbering (column i from the west, row j from the NORTH, see ``service.core.grid
 
 from __future__ import annotations
 
-import argparse
 import math
 import tomllib
 from dataclasses import dataclass
@@ -170,25 +169,6 @@ class Scenario:
 def available_scenarios() -> list[str]:
     """Names of the scenarios shipped in config/scenarios."""
     return sorted(path.stem for path in SCENARIO_DIR.glob("*.toml"))
-
-
-def add_world_arguments(parser: argparse.ArgumentParser, default_scenario: str) -> None:
-    """``--scenario``, ``--seed`` and ``--set``: the world a simulator command runs (``load_scenario``
-    with ``args.scenario`` and ``args.overrides``, then ``build_world`` with ``args.seed``)."""
-    parser.add_argument(
-        "--scenario",
-        default=default_scenario,
-        help=f"scenario name ({', '.join(available_scenarios())}) or a TOML path (default: %(default)s)",
-    )
-    parser.add_argument("--seed", type=int, default=None, help="world seed (default: the scenario's)")
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario key, e.g. world.flow.strength_mps=0.2 (repeatable)",
-    )
 
 
 def _locate(name_or_path: str | Path) -> Path:

@@ -21,7 +21,6 @@ manager and closes what it opened if a later one fails.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import contextlib
 import logging
@@ -35,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from service.app.gate import CommandGate, GateState
-from service.core.config import Config, load_config
+from service.core.config import Config
 from service.core.grid import Grid
 from service.core.mapping import mapper_from_config
 from service.core.mission import Mission, MissionOutput, PlumeFound, PlumeLost, SourceDeclared
@@ -453,21 +452,3 @@ async def serve(
             with contextlib.suppress(NotImplementedError):
                 loop.add_signal_handler(sig, stop.set)
     return await service.run(stop)
-
-
-def add_parser(subparsers: Any, name: str) -> None:
-    parser = subparsers.add_parser(name, help="run the onboard service")
-    parser.add_argument("--config", help="TOML configuration file (default: config/default.toml)")
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="SECTION.KEY=VALUE",
-        help="override one key (repeatable)",
-    )
-
-
-def run(args: argparse.Namespace) -> int:
-    config = load_config(args.config, args.set)
-    asyncio.run(serve(config))
-    return 0

@@ -212,17 +212,6 @@ def _json(message: RecordedMessage) -> dict[str, Any]:
     return value
 
 
-def add_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser], name: str) -> None:
-    parser = subparsers.add_parser(
-        name,
-        help="recompute a recorded run's maps and compare them bit for bit",
-        description="Recompute a recorded run's maps from its recorded configuration and observations "
-        "and compare them bit for bit with the recorded maps; exit status 0 only if all match.",
-    )
-    parser.add_argument("file", type=Path, metavar="FILE.mcap", help="a recording made by oslim serve / sim")
-    parser.add_argument("--json", action="store_true", help="print the report as one JSON line")
-
-
 def run(args: argparse.Namespace) -> int:
     """Exit status 0 only when every recorded grid and estimate was reproduced."""
     path: Path = args.file

@@ -32,7 +32,7 @@ import numpy as np
 from service.app.service import Clock, Service, ServiceStats
 from service.core.config import Config
 from service.core.errors import LinkError, OslimError
-from sim_bridge.scenarios import Scenario, available_scenarios, build_world, load_scenario
+from sim_bridge.scenarios import Scenario, build_world, load_scenario
 from sim_bridge.stub import StubOptions, VehicleStub
 from sim_bridge.world import World
 
@@ -257,27 +257,6 @@ async def _started(service: Service, task: asyncio.Task[ServiceStats]) -> None:
 
 def _note_ticks(service: Service, tick_wall: dict[float, float]) -> None:
     tick_wall.update(service.tick_wall)
-
-
-def add_parser(subparsers: Any, name: str) -> None:
-    parser = subparsers.add_parser(
-        name, help="one closed-loop mission: vehicle stub + plume + service on loopback"
-    )
-    parser.add_argument(
-        "--scenario", default="wang-laminar", help=f"one of {', '.join(available_scenarios())} or a path"
-    )
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second")
-    parser.add_argument(
-        "--max-time", type=float, default=600.0, help="give up after this many simulated seconds"
-    )
-    parser.add_argument(
-        "--set", action="append", default=[], metavar="SECTION.KEY=VALUE", help="override a key"
-    )
-    parser.add_argument(
-        "--recorder-dir", default=None, help="where the run's MCAP goes (default: recorder.dir)"
-    )
-    parser.add_argument("--no-probe", action="store_true", help="skip the Zenoh subscriber process")
 
 
 def run(args: argparse.Namespace) -> int:

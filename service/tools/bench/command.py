@@ -5,78 +5,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-from typing import Any
 
 from service.tools.bench import mapping, search
 from sim_bridge.scenarios import load_scenario
-
-
-def _at_least(minimum: int) -> Any:
-    """An argparse type: an integer of at least ``minimum``, or a usage error naming the bound."""
-
-    def parse(text: str) -> int:
-        value = int(text)
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"must be at least {minimum}, got {value}")
-        return value
-
-    parse.__name__ = "integer"  # argparse names the type in "invalid integer value"
-    return parse
-
-
-def add_parser(subparsers: Any, name: str) -> None:
-    parser = subparsers.add_parser(name, help="benchmarks (mapping speed and memory, ...)")
-    kinds = parser.add_subparsers(dest="bench", required=True, metavar="BENCH")
-    m = kinds.add_parser("mapping", help="time per tick and peak memory of each mapper")
-    m.add_argument("--json", action="store_true", help="one JSON object per line")
-    m.add_argument("--mapper", action="append", dest="mappers", help="mapper(s) to run (default: all)")
-    m.add_argument(
-        "--cells", type=int, action="append", choices=sorted(mapping.GRID_SHAPES), help="grid size(s)"
-    )
-    m.add_argument("--window", type=int, default=200, help="flow-history window, ticks (default 200)")
-    m.add_argument("--ticks", type=int, default=None, help="timed ticks per configuration")
-
-    s = kinds.add_parser("search", help="seeded closed-loop missions: success rate and time to the source")
-    s.add_argument("--scenario", required=True, help="scenario name (config/scenarios) or TOML path")
-    s.add_argument(
-        "--mapper", action="append", dest="mappers", help="mapper (repeat, or 'all'; default: the scenario's)"
-    )
-    s.add_argument(
-        "--planner",
-        action="append",
-        dest="planners",
-        help="planner (repeat, or 'all'; default: the scenario's)",
-    )
-    s.add_argument(
-        "--runs", type=_at_least(1), default=20, help="missions per configuration, seeds 0..N-1 (default 20)"
-    )
-    s.add_argument(
-        "--first-seed",
-        type=_at_least(0),
-        default=0,
-        help="start the seeds here: K..K+N-1 (default 0; another set checks a tuned setting)",
-    )
-    s.add_argument("--jobs", type=int, default=None, help="worker processes (default: the cores)")
-    s.add_argument(
-        "--max-time",
-        type=float,
-        default=search.DEFAULT_MAX_TIME_S,
-        help="mission time limit, s (default 300)",
-    )
-    s.add_argument("--set", action="append", default=[], dest="overrides", metavar="KEY=VALUE",
-                   help="override a scenario key (e.g. declaration.probability=0.9)")  # fmt: skip
-    s.add_argument("--json", action="store_true", help="one JSON object per configuration")
-    s.add_argument("--report", metavar="DIR", help="also write report.md and PNG pictures of a mission here")
-    s.add_argument(
-        "--oracle-declaration",
-        action="store_true",
-        help="a bound, not a result: declarations away from the true source are ignored (a perfect guard); "
-        "with --set declaration.* it measures what the guards against wrong declarations cost",
-    )
-
-    p = kinds.add_parser("plume", help="filament plume model: steps per second at a puff count")
-    p.add_argument("--puffs", type=int, default=10_000, help="live puffs at steady state (default 10000)")
-    p.add_argument("--json", action="store_true", help="one JSON object")
 
 
 def run(args: argparse.Namespace) -> int:
