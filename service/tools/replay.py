@@ -1,10 +1,11 @@
 """``oslim replay RUN.mcap``: recompute a run's maps from its recording and compare bit for bit.
 
 The recording holds the resolved configuration and every observation the mapper consumed
-(``recorder``). Replay builds the same mapper from that configuration, feeds it the observations
-tick by tick, and compares its pi and alpha with the recorded ``slim`` and ``plume`` grids
-(float32 as recorded, compared bit for bit) and its estimate with the recorded one (JSON floats,
-exact). A file cut short by a crash is replayed up to its last complete record.
+(``recorder``). Replay builds the same ``service.api.Search`` from that configuration, feeds the
+observations to its maps tick by tick (``Search.update_map``), and compares its pi and alpha
+with the recorded ``slim`` and ``plume`` grids (float32 as recorded, compared bit for bit) and
+its estimate with the recorded one (JSON floats, exact). A file cut short by a crash is
+replayed up to its last complete record.
 """
 
 from __future__ import annotations
@@ -14,17 +15,16 @@ import json
 import struct
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 from mcap.exceptions import McapError
 from mcap.stream_reader import CRCValidationError
 
+from service.api import Search
 from service.core.config import build_config
 from service.core.errors import OslimError
-from service.core.grid import Grid
-from service.core.mapping import mapper_from_config
 from service.edges.grid_message import decode_grid
 from service.edges.messages import observation_from_json
 from service.edges.recorder import (
@@ -36,9 +36,6 @@ from service.edges.recorder import (
     RecordedMessage,
     RecordingReader,
 )
-
-if TYPE_CHECKING:
-    from service.core.mapping import SourceMapper
 
 _ESTIMATE_FIELDS = ("cell", "x", "y", "probability", "entropy")
 
@@ -118,10 +115,10 @@ def replay(path: str | Path) -> ReplayReport:
 
 
 class _Session:
-    """The replay state: the mapper rebuilt from the recorded configuration, and the tallies."""
+    """The replay state: the search rebuilt from the recorded configuration, and the tallies."""
 
     def __init__(self) -> None:
-        self.mapper: SourceMapper | None = None
+        self.search: Search | None = None
         self.tick = 0  # the sequence number of the last observation fed to the mapper
         self.ticks = 0
         self.grids = 0
@@ -131,31 +128,30 @@ class _Session:
 
     def consume(self, message: RecordedMessage) -> None:
         if message.topic == CONFIG_TOPIC:
-            if self.mapper is not None:
+            if self.search is not None:
                 raise ReplayError("the recording holds more than one configuration")
-            config = build_config(_json(message), origin="recorded configuration")
-            self.mapper = mapper_from_config(config, Grid.from_config(config.area))
+            self.search = Search(build_config(_json(message), origin="recorded configuration"))
         elif message.topic == OBS_TOPIC:
             try:
                 obs = observation_from_json(_json(message))
             except (TypeError, ValueError) as exc:
                 raise ReplayError(f"tick {message.sequence}: bad observation: {exc}") from None
-            self._require_mapper().update(obs)
+            self._require_search().update_map(obs)
             self.tick = message.sequence
             self.ticks += 1
         elif message.topic in (SLIM_TOPIC, PLUME_TOPIC):
             if self._same_tick(message):
-                mapper = self._require_mapper()
+                search = self._require_search()
                 self._compare_grid(
-                    message, mapper.likelihood if message.topic == SLIM_TOPIC else mapper.plume
+                    message, search.likelihood if message.topic == SLIM_TOPIC else search.plume
                 )
         elif message.topic == ESTIMATE_TOPIC and self._same_tick(message):
             self._compare_estimate(message)
 
-    def _require_mapper(self) -> SourceMapper:
-        if self.mapper is None:
+    def _require_search(self) -> Search:
+        if self.search is None:
             raise ReplayError("the recording has no configuration before its first observation")
-        return self.mapper
+        return self.search
 
     def _same_tick(self, message: RecordedMessage) -> bool:
         if message.sequence == self.tick and self.ticks > 0:
@@ -192,7 +188,7 @@ class _Session:
     def _compare_estimate(self, message: RecordedMessage) -> None:
         self.estimates += 1
         recorded = _json(message)
-        recomputed = asdict(self._require_mapper().estimate())
+        recomputed = asdict(self._require_search().estimate())
         differing = [k for k in _ESTIMATE_FIELDS if recorded.get(k) != recomputed[k]]
         if differing:
             shown = ", ".join(f"{k} recorded {recorded.get(k)!r} replay {recomputed[k]!r}" for k in differing)

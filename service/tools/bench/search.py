@@ -1,13 +1,14 @@
 """Search benchmark: seeded closed-loop missions in one process, and their statistics.
 
-``run_mission`` is the in-process closed loop: the same core as the service (``Mission``, the
-configured mapper and planner, ``TickAggregator``) against the simulated ``World`` of a scenario,
-with no sockets and no clock. Within each mapping tick the world is stepped at its own rate
-(10 Hz) and sampled at the telemetry rate the service asks for (``mavlink.stream_hz``): position,
-flow and chemical reading go into the tick aggregator exactly as the MAVLink edge would put
-them, so the observation is the tick's mean flow and thresholded peak reading (seed
-hmm-plume-mapping §III-A). The vehicle flies to the first of the mission's waypoints, as the
-service commands it. Everything random (start, plume, flow noise, detector) comes from the seed.
+``run_mission`` is the in-process closed loop: the same ``service.api.Search`` as the service
+(the configured mapper and planner, the mission, the tick aggregation) against the simulated
+``World`` of a scenario, with no sockets and no clock. Within each mapping tick the world is
+stepped at its own rate (10 Hz) and sampled at the telemetry rate the service asks for
+(``mavlink.stream_hz``): position, flow and chemical reading go into the search exactly as the
+MAVLink edge puts them, so the observation is the tick's mean flow and thresholded peak reading
+(seed hmm-plume-mapping §III-A). The vehicle flies to the first of the mission's waypoints, as
+the service commands it. Everything random (start, plume, flow noise, detector) comes from the
+seed.
 
 A mission ends at its first declaration or at ``max_time_s``. It *succeeds* when the declared
 cell is within one cell (column and row) of the source's cell; a declaration farther away is a
@@ -33,15 +34,12 @@ from typing import Any
 
 import numpy as np
 
+from service.api import Declaration, Search
 from service.core.config import MappingMethod, PlanningMethod
 from service.core.errors import ConfigError
 from service.core.grid import Grid
-from service.core.mapping import mapper_from_config
 from service.core.mapping.belief import FloatArray
-from service.core.mission import Mission, MissionState, SourceDeclared
-from service.core.planning.base import VehicleState
-from service.core.samples import ChemSample, FlowSample, Position
-from service.core.tick import TickAggregator
+from service.core.mission import MissionState
 from sim_bridge.scenarios import Scenario, build_world, load_scenario, place
 
 DEFAULT_MAX_TIME_S = 300.0
@@ -187,9 +185,7 @@ def run_mission(
     def at_source(cell: int) -> bool:
         return within_one_cell(grid, *grid.centre(cell), *source)
 
-    mapper = mapper_from_config(config, grid)
-    mission = Mission.from_config(config, grid, mapper, admit=at_source if oracle else None)
-    aggregator = TickAggregator(config.sensor.threshold, max_position_age_s=2.0 * config.mapping.tick_s)
+    search = Search(config, admit=at_source if oracle else None)
     steps_per_tick = max(1, round(config.mapping.tick_s / world.dt_s))
     sample_every = max(1, round(1.0 / (config.mavlink.stream_hz * world.dt_s)))
     world.driving = True
@@ -198,7 +194,7 @@ def run_mission(
     step_count = 0
     first_detection: float | None = None
     reached: float | None = None
-    declaration: SourceDeclared | None = None
+    declaration: Declaration | None = None
     track: list[TrackPoint] = []
     while world.time_s < max_time_s - 1e-9 and declaration is None:
         for _ in range(steps_per_tick):
@@ -209,34 +205,32 @@ def run_mission(
             if step_count % sample_every == 0:
                 t = world.time_s
                 flow_x, flow_y = world.flow_at_vehicle()
-                aggregator.add(Position(t, world.vehicle.x_m, world.vehicle.y_m))
-                aggregator.add(FlowSample(t, flow_x, flow_y))
-                aggregator.add(ChemSample(t, world.chem_reading()))
-        obs = aggregator.close(world.time_s).observation
-        if obs is None:  # cannot happen with every stream sampled; kept for a sampling rate < 1/tick
-            continue
+                search.add_position(t, world.vehicle.x_m, world.vehicle.y_m)
+                search.add_flow(t, flow_x, flow_y)
+                search.add_chemical(t, world.chem_reading())
         v = world.vehicle
-        out = mission.step(obs, VehicleState(v.x_m, v.y_m, v.heading_rad))
-        if out.waypoints is not None:
-            world.target_m = (out.waypoints[0].x, out.waypoints[0].y) if out.waypoints else None
-        if obs.detected and first_detection is None:
-            first_detection = obs.time_s
+        # the planner starts from where the simulated vehicle is now, as the service's does
+        step = search.tick(world.time_s, vehicle=(v.x_m, v.y_m, v.heading_rad))
+        if step is None:  # cannot happen with every stream sampled; kept for a sampling rate < 1/tick
+            continue
+        if step.waypoints is not None:
+            world.target_m = step.waypoints[0] if step.waypoints else None
+        if step.detected and first_detection is None:
+            first_detection = step.time_s
         if reached is None and grid.contains(v.x_m, v.y_m) and within_one_cell(grid, v.x_m, v.y_m, *source):
-            reached = obs.time_s
-        for event in out.events:
-            if isinstance(event, SourceDeclared):
-                declaration = event
+            reached = step.time_s
+        declaration = step.declared
         if record:
-            est = out.estimate
+            obs, est = step.observation, step.estimate
             track.append(
-                TrackPoint(obs.time_s, obs.x, obs.y, obs.detected, out.state, est.x, est.y, est.probability)
+                TrackPoint(obs.time_s, obs.x, obs.y, obs.detected, step.state, est.x, est.y, est.probability)
             )
 
     trace = None
     if record:
         puffs = world.plume.puffs()
-        trace = MissionTrace(tuple(track), np.array(mapper.likelihood), np.array(puffs[:, :2]))
-    estimate = mapper.estimate()
+        trace = MissionTrace(tuple(track), np.array(search.likelihood), np.array(puffs[:, :2]))
+    estimate = search.estimate()
     on_source = within_one_cell(grid, estimate.x, estimate.y, *source)
     if declaration is None:
         return MissionResult(
