@@ -11,12 +11,14 @@ Tasks, all on one event loop:
 - *setpoints*: the current target, re-sent at ``mavlink.setpoint_rate_hz`` only while the gate
   allows it (armed, GUIDED, link alive) and only if it is a safe point.
 
-The numerical work (mapper, mission) is the same pure code the benchmarks and replay run.
+The numerical work goes through ``service.api.Search`` (mapper, mission, tick aggregation), the
+same as the benchmarks, replay and users' own programs. The tasks run in one
+``asyncio.TaskGroup``: one that fails stops the others, and its error is the run's.
 
-Start-up order (so that a failure leaves nothing half-started): configuration, signing key and
-restart snapshot are read first, then the MAVLink link, then Zenoh, and the MCAP recorder last,
-so no run file is created for a service that did not start. Each edge is an (async) context
-manager and closes what it opened if a later one fails.
+The service receives its edges (``service.app.edges``: protocols for the MAVLink link, the map
+publisher and the recorder), so it runs as well against in-memory fakes. Start-up order (so that
+a failure leaves nothing half-started): configuration, signing key and restart snapshot are read
+first, then ``open_edges`` opens the MAVLink link, Zenoh, and the MCAP recorder last.
 """
 
 from __future__ import annotations
@@ -28,26 +30,23 @@ import math
 import signal
 import time
 from collections import deque
+from collections.abc import Coroutine
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from service.api import Search, Step
+from service.app.edges import EdgeOpener, Edges, VehicleLink, open_edges
 from service.app.gate import CommandGate, GateState
 from service.core.config import Config
-from service.core.grid import Grid
-from service.core.mapping import mapper_from_config
-from service.core.mission import Mission, MissionOutput, PlumeFound, PlumeLost, SourceDeclared
-from service.core.planning.base import VehicleState, Waypoint
+from service.core.mapping.mapper import SourceMapper
+from service.core.mission import MissionEvent, PlumeFound, PlumeLost, SourceDeclared
+from service.core.planning.base import Waypoint
 from service.core.planning.safety import is_safe_point
-from service.core.samples import Position
-from service.core.tick import Tick, TickAggregator
-from service.edges.mavlink_link import MavlinkLink
-from service.edges.recorder import Recorder
 from service.edges.signing import load_signing_key
 from service.edges.snapshot import Snapshot, SnapshotWriter, fingerprint, map_digest, read_snapshot
 from service.edges.telemetry import Heartbeat, Rejected, TelemetrySettings, decode
-from service.edges.zenoh_link import ZenohLink
 
 log = logging.getLogger("oslim")
 
@@ -133,13 +132,9 @@ class Service:
     def __init__(self, config: Config, *, clock: Clock | None = None) -> None:
         self.config = config
         self.clock = clock or Clock()
-        self.grid = Grid.from_config(config.area)
-        self.mapper = mapper_from_config(config, self.grid)
-        self.mission = Mission.from_config(config, self.grid, self.mapper)
+        self.search = Search(config)
+        self.grid = self.search.grid
         self.gate = CommandGate(config.mavlink.guided_mode, config.mavlink.link_timeout_s)
-        self.aggregator = TickAggregator(
-            config.sensor.threshold, max_position_age_s=2.0 * config.mapping.tick_s
-        )
         self.settings = TelemetrySettings(
             chem_name=config.sensor.name,
             detection_name=config.sensor.detection_name,
@@ -149,18 +144,15 @@ class Service:
         self.stats = ServiceStats()
         self.target: Waypoint | None = None
         self.declared: SourceDeclared | None = None
+        self.edges: Edges | None = None
+        """The open edges while the service runs (for probes and tests; the tasks get them passed)."""
         self.started = asyncio.Event()
         """Set once the MAVLink, Zenoh and MCAP edges are all open."""
         self.tick_wall: deque[tuple[float, float]] = deque(maxlen=4096)
         """(tick time_s rounded to ms, wall-clock time.time() when the tick started): for latency probes."""
-        self._position: Position | None = None
         self._silent: dict[str, int] = {}
-        self._heading_rad = 0.0
         self._gate_state = GateState(False, "starting")
         self._link_was_alive = False
-        self._link: MavlinkLink | None = None
-        self._zenoh: ZenohLink | None = None
-        self._recorder: Recorder | None = None
         self._signing_key = (
             load_signing_key(config.mavlink.signing_key_file) if config.mavlink.signing_key_file else None
         )
@@ -174,69 +166,73 @@ class Service:
             if snapshot is not None:
                 self._restore(snapshot)
 
+    @property
+    def mapper(self) -> SourceMapper:
+        """The search's mapper (its maps are what the service publishes)."""
+        return self.search.mapper
+
     def _restore(self, snapshot: Snapshot) -> None:
         try:
-            self.mapper.restore_state(snapshot.mapper)
-            self.mission.restore_state(snapshot.mission)
+            self.search.mapper.restore_state(snapshot.mapper)
+            self.search.mission.restore_state(snapshot.mission)
         except (KeyError, TypeError, ValueError) as exc:
             # a half-restored mapper is worse than a flat one: start again from scratch
             log.warning("snapshot: not restored (%s), starting with a flat map", exc)
-            self.mapper = mapper_from_config(self.config, self.grid)
-            self.mission = Mission.from_config(self.config, self.grid, self.mapper)
+            self.search = Search(self.config)
             return
         self.clock.resume_at(snapshot.time_s)
         self.stats.restored_ticks = snapshot.ticks
-        self.stats.state = str(self.mission.state)
+        self.stats.state = str(self.search.state)
         log.info(
             "snapshot: restored %d ticks, mission %s, estimate cell %d, map %s", snapshot.ticks,
-            self.mission.state, self.mapper.estimate().cell, map_digest(self.mapper.likelihood),
+            self.search.state, self.search.estimate().cell, map_digest(self.search.likelihood),
         )  # fmt: skip
 
-    async def run(self, stop: asyncio.Event) -> ServiceStats:
-        """Run until ``stop`` is set; then stop commanding, flush and close everything."""
+    async def run(self, stop: asyncio.Event, *, opener: EdgeOpener = open_edges) -> ServiceStats:
+        """Open the edges (``opener``, by default the real ones), run until ``stop`` is set; then
+        stop commanding, flush and close everything."""
+        async with opener(self.config, self.grid, self.clock.now, self._signing_key) as edges:
+            return await self.run_with(edges, stop)
+
+    async def run_with(self, edges: Edges, stop: asyncio.Event) -> ServiceStats:
+        """Run the service's tasks over open ``edges`` until ``stop`` is set or a task ends; a
+        task's error is raised (the first one, when several fail together)."""
         cfg = self.config
-        link_edge = MavlinkLink(
-            cfg.mavlink.url,
-            clock=self.clock.now,
-            queue_size=cfg.mavlink.queue_size,
-            signing_key=self._signing_key,
-            signing_link_id=cfg.mavlink.signing_link_id,
-        )
-        async with (
-            link_edge as link,
-            ZenohLink.from_config(cfg, self.grid) as zenoh_link,
-        ):
-            with Recorder(cfg) as recorder:  # last: no run file for a service that did not start
-                self._recorder = recorder
-                self.stats.mcap = str(recorder.path)
-                self._zenoh, self._link = zenoh_link, link
-                log.info(
-                    "serving vehicle %s: mapper %s, planner %s, grid %d x %d", cfg.vehicle.id,
-                    cfg.mapping.method, cfg.planning.method, self.grid.columns, self.grid.rows,
-                )  # fmt: skip
-                self.started.set()
-                tasks = [
-                    asyncio.create_task(self._read(link), name="read"),
-                    asyncio.create_task(self._heartbeat(link), name="heartbeat"),
-                    asyncio.create_task(self._ticks(), name="tick"),
-                    asyncio.create_task(self._setpoints(link), name="setpoints"),
-                ]
-                waiter = asyncio.create_task(stop.wait(), name="stop")
-                done, _ = await asyncio.wait([waiter, *tasks], return_when=asyncio.FIRST_COMPLETED)
+        self.edges = edges
+        self.stats.mcap = None if edges.recorder.path is None else str(edges.recorder.path)
+        log.info(
+            "serving vehicle %s: mapper %s, planner %s, grid %d x %d", cfg.vehicle.id,
+            cfg.mapping.method, cfg.planning.method, self.grid.columns, self.grid.rows,
+        )  # fmt: skip
+        self.started.set()
+        ended = asyncio.Event()  # stop was set, or a task returned (a link that closed)
+        try:
+            async with asyncio.TaskGroup() as tasks:
+                for name, job in (
+                    ("read", self._read(edges)),
+                    ("heartbeat", self._heartbeat(edges.link)),
+                    ("tick", self._ticks(edges)),
+                    ("setpoints", self._setpoints(edges)),
+                    ("stop", stop.wait()),
+                ):
+                    tasks.create_task(_ends_run(job, ended), name=name)
+                await ended.wait()
                 self.target = None  # stop commanding before anything else
-                for task in [waiter, *tasks]:
-                    task.cancel()
-                await asyncio.gather(waiter, *tasks, return_exceptions=True)
-                for task in done:
-                    if task is not waiter and not task.cancelled() and task.exception() is not None:
-                        raise task.exception()  # type: ignore[misc]
-                self._note_link(link)
+                raise _Stop
+        except* _Stop:
+            pass
+        except* BaseException as group:
+            self.target = None
+            raise _first(group) from None
+        finally:
+            self._note_link(edges.link)
             log.info("stopped: %s", self.stats.summary())
         return self.stats
 
     # -- tasks --------------------------------------------------------------------------------
 
-    async def _read(self, link: MavlinkLink) -> None:
+    async def _read(self, edges: Edges) -> None:
+        link = edges.link
         async for stamp, msg in link:
             item = decode(msg, stamp, self.settings)
             if item is None:
@@ -251,11 +247,9 @@ class Service:
                 if self.gate.system == item.system:
                     link.adopt_system(item.system)
             else:
-                if isinstance(item, Position):
-                    self._track_heading(item)
-                self.aggregator.add(item)
+                self.search.add(item)
 
-    async def _heartbeat(self, link: MavlinkLink) -> None:
+    async def _heartbeat(self, link: VehicleLink) -> None:
         while True:
             link.send_heartbeat()
             now = self.clock.now()
@@ -271,7 +265,7 @@ class Service:
             self._link_was_alive = alive
             await self.clock.sleep_until(now + 1.0)
 
-    async def _ticks(self) -> None:
+    async def _ticks(self, edges: Edges) -> None:
         tick_s = self.config.mapping.tick_s
         deadline = self.clock.now() + tick_s
         while True:
@@ -279,89 +273,83 @@ class Service:
             started = time.perf_counter()
             self.tick_wall.append((round(deadline, 3), time.time()))
             self.stats.jitter_ms.append(max(0.0, (self.clock.now() - deadline) / self.clock.speed * 1e3))
-            self._tick(self.aggregator.close(deadline), started)
-            if self._link is not None:
-                self._note_link(self._link)
+            self._tick(edges, deadline, started)
+            self._note_link(edges.link)
             self.stats.tick_ms.append((time.perf_counter() - started) * 1e3)
             deadline += tick_s
             if self.clock.now() > deadline:  # fell behind: skip missed deadlines, do not burst
                 deadline = self.clock.now() + tick_s
 
-    async def _setpoints(self, link: MavlinkLink) -> None:
+    async def _setpoints(self, edges: Edges) -> None:
         period = 1.0 / self.config.mavlink.setpoint_rate_hz
         while True:
             now = self.clock.now()
-            self._update_gate(now)
-            self._command(now)
+            self._update_gate(edges, now)
+            self._command(edges, now)
             await self.clock.sleep_until(now + period)
 
     # -- one tick -------------------------------------------------------------------------------
 
-    def _tick(self, tick: Tick, started: float) -> None:
+    def _tick(self, edges: Edges, time_s: float, started: float) -> None:
+        step = self.search.tick(time_s)
+        gaps = self.search.gaps
         self.stats.ticks += 1
-        for gap in tick.gaps:
+        for gap in gaps:
             self.stats.gaps[gap] = self.stats.gaps.get(gap, 0) + 1
-        self._report_silent_streams(tick)
-        obs = tick.observation
-        if obs is None:
-            log.debug("tick %.1f: no observation (missing %s)", tick.time_s, ", ".join(tick.gaps))
-            if self._recorder is not None:
-                self._recorder.write_event(
-                    tick.time_s, "gap", "missing " + ", ".join(tick.gaps), missing=list(tick.gaps)
-                )
+        self._report_silent_streams(gaps)
+        if step is None:
+            log.debug("tick %.1f: no observation (missing %s)", time_s, ", ".join(gaps))
+            edges.recorder.write_event(time_s, "gap", "missing " + ", ".join(gaps), missing=list(gaps))
             return
         self.stats.observations += 1
-        vehicle = VehicleState(obs.x, obs.y, self._heading_rad)
-        out = self.mission.step(obs, vehicle)
-        self.stats.state = str(out.state)
-        if out.waypoints is not None:
-            self.target = out.waypoints[0] if out.waypoints else None
-        self._publish(obs, out)
-        for event in out.events:
-            self._announce(event)
+        self.stats.state = str(step.state)
+        if step.waypoints is not None:
+            self.target = Waypoint(*step.waypoints[0]) if step.waypoints else None
+        self._publish(edges, step)
+        for event in step.events:
+            self._announce(edges, event)
         if self._snapshots is not None:
             self._snapshots.write(
                 Snapshot(
                     fingerprint=self._fingerprint,
-                    time_s=tick.time_s,
+                    time_s=time_s,
                     ticks=(self.stats.restored_ticks or 0) + self.stats.observations,
                     wall_time=time.time(),
-                    mapper=self.mapper.save_state(),
-                    mission=self.mission.save_state(),
+                    mapper=self.search.mapper.save_state(),
+                    mission=self.search.mission.save_state(),
                 )
             )
         now = self.clock.now()
-        self._update_gate(now)
-        if self._command(now):
+        self._update_gate(edges, now)
+        if self._command(edges, now):
             self.stats.latency_ms.append((time.perf_counter() - started) * 1e3)
 
-    def _report_silent_streams(self, tick: Tick) -> None:
+    def _report_silent_streams(self, gaps: tuple[str, ...]) -> None:
         """One warning when a stream has been silent for SILENT_TICKS ticks, one line when it is back."""
         for stream in ("position", "flow", "chemical"):
-            if stream in tick.gaps:
+            if stream in gaps:
                 self._silent[stream] = self._silent.get(stream, 0) + 1
                 if self._silent[stream] == SILENT_TICKS:
                     log.warning("no %s readings for %d ticks: the map is not updated", stream, SILENT_TICKS)
             elif self._silent.pop(stream, 0) >= SILENT_TICKS:
                 log.info("%s readings are back", stream)
 
-    def _publish(self, obs: Any, out: MissionOutput) -> None:
-        slim, plume = self.mapper.likelihood, self.mapper.plume
-        state = str(out.state)
-        path = [(w.x, w.y) for w in out.waypoints] if out.waypoints is not None else None
-        if self._zenoh is not None:
-            try:
-                self._zenoh.publish_obs(obs)
-                self._zenoh.publish_maps(obs.time_s, slim, plume)
-                self._zenoh.publish_estimate(obs.time_s, state, out.estimate)
-                if path is not None:
-                    self._zenoh.publish_path(obs.time_s, path)
-            except Exception as exc:  # publishing must never stop the mission
-                log.error("zenoh publish failed: %s", exc)
-        if self._recorder is not None:
-            self._recorder.tick(obs, slim, plume, estimate=out.estimate, state=state, path=path)
+    def _publish(self, edges: Edges, step: Step) -> None:
+        obs = step.observation
+        slim, plume = self.search.likelihood, self.search.plume
+        state = str(step.state)
+        path = list(step.waypoints) if step.waypoints is not None else None
+        try:
+            edges.maps.publish_obs(obs)
+            edges.maps.publish_maps(obs.time_s, slim, plume)
+            edges.maps.publish_estimate(obs.time_s, state, step.estimate)
+            if path is not None:
+                edges.maps.publish_path(obs.time_s, path)
+        except Exception as exc:  # publishing must never stop the mission
+            log.error("zenoh publish failed: %s", exc)
+        edges.recorder.tick(obs, slim, plume, estimate=step.estimate, state=state, path=path)
 
-    def _note_link(self, link: MavlinkLink) -> None:
+    def _note_link(self, link: VehicleLink) -> None:
         """Copy the link's counters of input it threw away; one log line when their total grows
         (at most one per 10 ticks), so a stream of garbage is reported but cannot flood the log."""
         c = link.counters
@@ -378,7 +366,7 @@ class Service:
             log.warning("mavlink: ignored input so far: %s", counts)
             self._link_problems_logged = total
 
-    def _announce(self, event: PlumeFound | PlumeLost | SourceDeclared) -> None:
+    def _announce(self, edges: Edges, event: MissionEvent) -> None:
         if isinstance(event, PlumeFound):
             name, text = "plume_found", f"OSLIM plume found at {event.x:.1f},{event.y:.1f}"
         elif isinstance(event, PlumeLost):
@@ -391,14 +379,12 @@ class Service:
         detail = text if not isinstance(event, SourceDeclared) else f"{text}, check {event.check}"
         log.info("%s (t=%.1f s)", detail, event.time_s)
         self.stats.events.append({"time_s": event.time_s, "name": name, "x": event.x, "y": event.y})
-        if self._link is not None:
-            self._link.send_statustext(text)
-        if self._recorder is not None:
-            self._recorder.write_event(event.time_s, name, detail, x=event.x, y=event.y)
+        edges.link.send_statustext(text)
+        edges.recorder.write_event(event.time_s, name, detail, x=event.x, y=event.y)
 
     # -- commanding -----------------------------------------------------------------------------
 
-    def _update_gate(self, now: float) -> None:
+    def _update_gate(self, edges: Edges, now: float) -> None:
         state = self.gate.state(now)
         if state != self._gate_state:
             was = self._gate_state
@@ -409,13 +395,13 @@ class Service:
                 log.warning("stopped commanding: %s", state.reason)
             else:
                 log.info("not commanding: %s", state.reason)
-            if state.allowed and was.reason.startswith("link lost") and self._link is not None:
-                self._link.send_statustext("OSLIM link restored, commanding again")
+            if state.allowed and was.reason.startswith("link lost"):
+                edges.link.send_statustext("OSLIM link restored, commanding again")
 
-    def _command(self, now: float) -> bool:
+    def _command(self, edges: Edges, now: float) -> bool:
         """Send the current target if allowed and safe; True when a setpoint went out."""
-        target, link, system = self.target, self._link, self.gate.system
-        if target is None or link is None or system is None or not self._gate_state.allowed:
+        target, system = self.target, self.gate.system
+        if target is None or system is None or not self._gate_state.allowed:
             return False
         if not is_safe_point(self.grid, target.x, target.y):
             self.stats.unsafe_targets += 1
@@ -423,21 +409,37 @@ class Service:
             self.target = None
             return False
         cfg = self.config.mavlink
-        link.send_setpoint(
+        edges.link.send_setpoint(
             system, int(now * 1000), target.x, target.y, cfg.altitude_m, cfg.setpoint_type_mask
         )
         self.stats.setpoints += 1
-        if self._recorder is not None:
-            self._recorder.write_setpoint(now, target.x, target.y, cfg.altitude_m)
+        edges.recorder.write_setpoint(now, target.x, target.y, cfg.altitude_m)
         return True
 
-    def _track_heading(self, position: Position) -> None:
-        last = self._position
-        if last is not None:
-            dx, dy = position.x - last.x, position.y - last.y
-            if math.hypot(dx, dy) > 0.05:
-                self._heading_rad = math.atan2(dy, dx)
-        self._position = position
+
+class _Stop(Exception):  # noqa: N818 - a signal inside run_with, never seen outside
+    """Raised inside the task group when ``stop`` is set: it cancels the tasks."""
+
+
+async def _ends_run(job: Coroutine[Any, Any, Any], ended: asyncio.Event) -> None:
+    """Run ``job``; when it returns, the run ends."""
+    await job
+    ended.set()
+
+
+def _first(group: BaseExceptionGroup[BaseException]) -> BaseException:
+    """The first error of a task group's failure (others are logged): callers see a task's own
+    exception (``LinkError``...), as they did before the tasks ran in a group."""
+    errors = [e for e in _leaves(group) if not isinstance(e, _Stop)]
+    for extra in errors[1:]:
+        log.error("also failed: %r", extra)
+    return errors[0] if errors else group
+
+
+def _leaves(error: BaseException) -> list[BaseException]:
+    if isinstance(error, BaseExceptionGroup):
+        return [leaf for e in error.exceptions for leaf in _leaves(e)]
+    return [error]
 
 
 async def serve(

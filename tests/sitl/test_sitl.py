@@ -69,7 +69,7 @@ async def until(condition: Callable[[], bool], timeout_s: float, what: str) -> N
 
 
 def received(service: Service, kind: str) -> int:
-    link = service._link
+    link = service.edges.link if service.edges is not None else None
     return 0 if link is None else link.counters.by_type.get(kind, 0)
 
 

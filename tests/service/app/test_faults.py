@@ -66,8 +66,8 @@ def test_recording_fault_stops_recording_not_the_service(
             load_scenario("wang-laminar"), 1, speed=5.0, recorder_dir=str(tmp_path)
         ) as loop:
             service = loop.service
-            recorder = service._recorder
-            assert recorder is not None
+            assert service.edges is not None
+            recorder: Any = service.edges.recorder
             assert recorder.path is not None
             await until(lambda: service.stats.observations >= 2)
             if fault == "removed":
@@ -83,8 +83,7 @@ def test_recording_fault_stops_recording_not_the_service(
             observations, setpoints = service.stats.observations, service.stats.setpoints
             await until(lambda: service.stats.observations >= observations + 3)  # mapping goes on
             await until(lambda: service.stats.setpoints > setpoints)  # commanding goes on
-            assert service._zenoh is not None
-            assert "slim" in service._zenoh.latest()
+            assert "slim" in service.edges.maps.latest()  # type: ignore[attr-defined]
 
     with caplog.at_level(logging.ERROR, logger="service.edges.recorder"):
         asyncio.run(body())

@@ -132,12 +132,12 @@ def fuzz(tmp_path: Path, count: int, seed: int) -> dict[str, Any]:
                 done.set()
                 await asyncio.to_thread(thread.join, 10)
             crashed = loop.task.done()
-            reader = service._link._thread if service._link is not None else None
+            edges: Any = service.edges
+            reader = edges.link._thread if edges is not None else None
             reader_alive = reader is not None and reader.is_alive()
             ticks, setpoints = service.stats.ticks, service.stats.setpoints
             await until(lambda: service.stats.setpoints > setpoints)  # still commanding the vehicle
-            assert service._zenoh is not None
-            published = set(service._zenoh.latest())
+            published = set(edges.maps.latest())
             return {
                 "inputs": sum(sent.values()),
                 "by_kind": dict(sorted(sent.items())),

@@ -14,7 +14,6 @@ from mcap.reader import make_reader
 
 from service.app.service import SILENT_TICKS, Service
 from service.core.config import Config
-from service.core.tick import Tick
 from service.edges.grid_message import decode_grid
 from service.tools.replay import replay
 from service.tools.sim import ClosedLoop, closed_loop
@@ -156,9 +155,9 @@ def test_zenoh_maps_queryable_and_mcap_replay(tmp_path: Path) -> None:
 def test_silent_streams_are_reported_once(caplog: pytest.LogCaptureFixture) -> None:
     service = Service(Config())
     with caplog.at_level("INFO", logger="oslim"):
-        for k in range(SILENT_TICKS + 3):
-            service._report_silent_streams(Tick(float(k), None, ("flow", "chemical"), 0))
-        service._report_silent_streams(Tick(99.0, None, ("chemical",), 0))
+        for _ in range(SILENT_TICKS + 3):
+            service._report_silent_streams(("flow", "chemical"))
+        service._report_silent_streams(("chemical",))
     lines = [r.getMessage() for r in caplog.records]
     assert lines.count(f"no flow readings for {SILENT_TICKS} ticks: the map is not updated") == 1
     assert lines.count(f"no chemical readings for {SILENT_TICKS} ticks: the map is not updated") == 1

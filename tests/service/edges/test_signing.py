@@ -68,8 +68,8 @@ def test_signed_both_ways_is_accepted(tmp_path: Path) -> None:
         async with pair(tmp_path, KEY, KEY) as p:
             await until(lambda: p.stub.status().target_m is not None)  # commands accepted
             assert p.service.stats.observations > 0  # telemetry accepted
-            await until(lambda: p.service._link is not None and p.service._link.signing is not None
-                        and p.service._link.signing.good > 10)  # fmt: skip
+            await until(lambda: p.service.edges is not None and p.service.edges.link.signing is not None
+                        and p.service.edges.link.signing.good > 10)  # fmt: skip
             assert p.stub.signing is not None
             assert p.stub.signing.good > 0
             assert p.stub.signing.bad_signature == p.stub.signing.unsigned == 0

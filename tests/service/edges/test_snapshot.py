@@ -105,7 +105,7 @@ def test_service_restarted_in_process_has_the_same_map(tmp_path: Path) -> None:
         np.testing.assert_array_equal(again.mapper.likelihood, first.mapper.likelihood)
         np.testing.assert_array_equal(again.mapper.plume, first.mapper.plume)
         assert again.stats.restored_ticks == first.stats.observations
-        assert again.mission.state == first.mission.state
+        assert again.search.state == first.search.state
         assert again.clock.now() >= first.clock.now() - 1.0  # time continues, not from 0
 
     asyncio.run(body())
