@@ -1,7 +1,7 @@
 """What the service needs of its edges (protocols), and the real ones opened in start-up order.
 
 The ``Service`` only sees these protocols, so tests can hand it in-memory fakes
-(``tests/service/app/test_service.py``). ``open_edges`` opens the real ones, each connection
+(``tests/service/app/test_service_fakes.py``). ``open_edges`` opens the real ones, each connection
 owned by its own context manager: the MAVLink link first, then Zenoh, and the MCAP recorder last,
 so no run file is created for a service that did not start; a failure closes what was opened.
 """
