@@ -4,6 +4,8 @@ The ``Service`` only sees these protocols, so tests can hand it in-memory fakes
 (``tests/service/app/test_service_fakes.py``). ``open_edges`` opens the real ones, each connection
 owned by its own context manager: the MAVLink link first, then Zenoh, and the MCAP recorder last,
 so no run file is created for a service that did not start; a failure closes what was opened.
+The Foxglove live view (``foxglove.listen``) opens just before the recorder, whose writes it
+mirrors.
 """
 
 from __future__ import annotations
@@ -91,13 +93,23 @@ class RunRecorder(Protocol):
     def write_messages(self, records: Sequence[tuple[str, bytes]]) -> bool: ...
 
 
+class LiveFeed(Protocol):
+    """The live view (Foxglove WebSocket): it mirrors the recording, so the service writes to it
+    only through the recorder; the service knows where it listens."""
+
+    @property
+    def port(self) -> int: ...
+
+
 @dataclass(frozen=True)
 class Edges:
-    """The open edges of one run of the service."""
+    """The open edges of one run of the service; ``live`` is None while the live view is off
+    (``foxglove.listen`` empty)."""
 
     link: VehicleLink
     maps: MapPublisher
     recorder: RunRecorder
+    live: LiveFeed | None = None
 
 
 EdgeOpener = Callable[
@@ -125,4 +137,4 @@ async def open_edges(
             open_live_view(config.foxglove.listen) as live,
             Recorder(config, mirror=live) as recorder,  # last: no run file for a service that did not start
         ):
-            yield Edges(link, zenoh_link, recorder)
+            yield Edges(link, zenoh_link, recorder, live)

@@ -92,11 +92,11 @@ def test_the_heading_follows_the_track_unless_given() -> None:
     search = Search(Config())
     search.add_position(0.0, 10.0, 0.0)
     search.add_position(0.5, 10.0, 1.0)  # moved north
-    assert search._heading_rad == pytest.approx(math.pi / 2)
+    assert search.heading_rad == pytest.approx(math.pi / 2)
     search.add_position(0.7, 10.0, 1.01)  # too small a move to say anything
-    assert search._heading_rad == pytest.approx(math.pi / 2)
+    assert search.heading_rad == pytest.approx(math.pi / 2)
     search.add_position(0.8, 10.0, 1.01, heading_rad=0.0)
-    assert search._heading_rad == 0.0
+    assert search.heading_rad == 0.0
 
 
 def test_bad_numbers_are_refused() -> None:

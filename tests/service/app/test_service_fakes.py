@@ -17,6 +17,7 @@ from service.app.service import STREAMS, Clock, Service
 from service.core.config import Config
 from service.core.errors import LinkError
 from service.core.observation import Observation
+from service.edges.foxglove_scene import VEHICLE_TOPIC
 from service.edges.mavlink_link import LinkCounters
 from service.edges.signing import SigningCounters
 
@@ -186,6 +187,8 @@ def test_the_service_maps_publishes_records_and_commands_over_fake_edges() -> No
     for obs, slim in zip(recorder.ticks, maps.slim, strict=True):
         replayed.update_map(obs)
         np.testing.assert_array_equal(slim, replayed.likelihood)
+    # every tick also records what Foxglove draws: the vehicle among it, once per tick
+    assert recorder.scene.count(VEHICLE_TOPIC) == len(recorder.ticks)
     first = recorder.ticks[0]
     assert first.flow_x == pytest.approx(-0.5)
     assert first.flow_y == pytest.approx(0.0)

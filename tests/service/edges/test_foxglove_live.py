@@ -144,9 +144,13 @@ def test_a_client_watches_a_simulated_mission_live(tmp_path: Path) -> None:
     async def watch() -> dict[str, bytes]:
         wanted = {SLIM_TOPIC, VEHICLE_TOPIC}
         async with (
-            closed_loop(scenario, 1, speed=10.0, recorder_dir=str(tmp_path)),
+            closed_loop(scenario, 1, speed=10.0, recorder_dir=str(tmp_path)) as loop,
             connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS) as ws,  # type: ignore[arg-type]
         ):
+            edges = loop.service.edges  # the live view is one of the service's edges
+            assert edges is not None
+            assert edges.live is not None
+            assert edges.live.port == port
             client = FoxgloveClient(ws)
             await asyncio.wait_for(client.wait_for_topics(wanted), TIMEOUT_S)
             await client.subscribe(sorted(wanted))
