@@ -1,1 +1,1 @@
-"""Benchmarks runnable by anyone: ``oslim bench mapping|plume|search``."""
+"""Benchmarks runnable by anyone: ``oslim bench mapping|plume|search|suite``."""
