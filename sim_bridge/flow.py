@@ -20,7 +20,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from service.errors import ConfigError
+from service.core.errors import ConfigError
 
 FloatArray = npt.NDArray[np.float64]
 Vector = tuple[float, float]

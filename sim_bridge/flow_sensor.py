@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from service.errors import ConfigError
+from service.core.errors import ConfigError
 
 
 @dataclass(frozen=True)

@@ -40,9 +40,9 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
 
-from service.config import Config, build_config
-from service.errors import ConfigError
-from service.grid import Grid, Rectangle
+from service.core.config import Config, build_config
+from service.core.errors import ConfigError
+from service.core.grid import Grid, Rectangle
 from sim_bridge.autopilot import AUTOPILOTS, VehicleKind
 from sim_bridge.scenarios import Scenario, WorldSpec
 

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from service.errors import ConfigError
-from service.grid import Rectangle
+from service.core.errors import ConfigError
+from service.core.grid import Rectangle
 from sim_bridge.flow import FlowField
 
 FloatArray = npt.NDArray[np.float64]

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from service.errors import ConfigError
+from service.core.errors import ConfigError
 from sim_bridge.flow import MeanderingFlow
 from sim_bridge.plume import PuffParams, PuffPlume
 

@@ -1,19 +1,18 @@
 """Named scenarios: one TOML file each under ``config/scenarios/``.
 
 A scenario file holds the service's configuration tables (``[area]``, ``[sensor]``,
-``[mapping]``...), validated by ``service.config.build_config``, plus a ``[world]`` table that
+``[mapping]``...), validated by ``service.core.config.build_config``, plus a ``[world]`` table that
 describes the world the service does not know: the source, the flow model, the plume, the
 vehicle and the detector. ``load_scenario`` validates both (unknown keys, wrong types and
 out-of-range values raise ``ConfigError`` naming the key); ``build_world`` turns a scenario and
 a seed into a ``World``, drawing the random placements from that seed.
 
 Positions are ``position_m = [x, y]`` in the map frame, ``cell = [i, j]`` in the papers'
-numbering (column i from the west, row j from the NORTH, see ``service.grid``), or ``"random"``.
+numbering (column i from the west, row j from the NORTH, see ``service.core.grid``), or ``"random"``.
 """
 
 from __future__ import annotations
 
-import argparse
 import math
 import tomllib
 from dataclasses import dataclass
@@ -23,9 +22,9 @@ from typing import Annotated, Any, Literal, Self
 import numpy as np
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
 
-from service.config import Config, apply_override, build_config, parse_override
-from service.errors import ConfigError
-from service.grid import Grid
+from service.core.config import Config, apply_override, build_config, parse_override
+from service.core.errors import ConfigError
+from service.core.grid import Grid
 from sim_bridge.autopilot import AUTOPILOTS, VehicleKind
 from sim_bridge.detector import BinaryDetector, DetectorParams
 from sim_bridge.flow import FlowField, MeanderingFlow, SwitchedFlow, TurbulentFlow, UniformFlow
@@ -184,25 +183,6 @@ class Scenario:
 def available_scenarios() -> list[str]:
     """Names of the scenarios shipped in config/scenarios."""
     return sorted(path.stem for path in SCENARIO_DIR.glob("*.toml"))
-
-
-def add_world_arguments(parser: argparse.ArgumentParser, default_scenario: str) -> None:
-    """``--scenario``, ``--seed`` and ``--set``: the world a simulator command runs (``load_scenario``
-    with ``args.scenario`` and ``args.overrides``, then ``build_world`` with ``args.seed``)."""
-    parser.add_argument(
-        "--scenario",
-        default=default_scenario,
-        help=f"scenario name ({', '.join(available_scenarios())}) or a TOML path (default: %(default)s)",
-    )
-    parser.add_argument("--seed", type=int, default=None, help="world seed (default: the scenario's)")
-    parser.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a scenario key, e.g. world.flow.strength_mps=0.2 (repeatable)",
-    )
 
 
 def _locate(name_or_path: str | Path) -> Path:

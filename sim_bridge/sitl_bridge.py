@@ -39,9 +39,10 @@ from enum import StrEnum
 from types import TracebackType
 from typing import Any, Self
 
-from service import mavlink_dialect
-from service.errors import ConfigError, LinkError
-from service.telemetry import Heartbeat, Position, TelemetrySettings, decode
+from service.core.errors import ConfigError, LinkError
+from service.core.samples import Position
+from service.edges import mavlink_dialect
+from service.edges.telemetry import Heartbeat, TelemetrySettings, decode
 from sim_bridge.world import World
 
 log = logging.getLogger(__name__)

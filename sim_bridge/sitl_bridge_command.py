@@ -11,76 +11,14 @@ import signal
 from pathlib import Path
 from typing import Any
 
-from service.config import Config
-from service.errors import ConfigError
-from sim_bridge.scenarios import add_world_arguments, build_world, load_scenario
-from sim_bridge.sitl_bridge import MAV_COMP_ID_PERIPHERAL, BridgeOptions, SitlBridge
+from service.core.config import Config
+from service.core.errors import ConfigError
+from sim_bridge.scenarios import build_world, load_scenario
+from sim_bridge.sitl_bridge import BridgeOptions, SitlBridge
 
 log = logging.getLogger(__name__)
 
 _STATUS_PERIOD_S = 10.0
-
-
-def add_parser(subparsers: Any, name: str) -> argparse.ArgumentParser:
-    defaults = BridgeOptions()
-    parser: argparse.ArgumentParser = subparsers.add_parser(
-        name,
-        help="relay MAVLink between ArduPilot SITL and the service, injecting a scenario's plume",
-        description="Forwards every MAVLink frame between SITL and the service unchanged (like "
-        "mavlink-router), runs the scenario's flow and puff plume at the vehicle's LOCAL_POSITION_NED "
-        "and injects NAMED_VALUE_FLOAT CHEM and WIND toward the service as a peripheral of the vehicle.",
-    )
-    parser.add_argument(
-        "--sitl",
-        default=defaults.sitl_url,
-        help="SITL's side: tcp:, tcpin:, udpin:, udpout: (default: %(default)s)",
-    )
-    parser.add_argument(
-        "--to",
-        default=defaults.to_url,
-        help="the service's side; udpout reaches the service's default udpin:0.0.0.0:14550 "
-        "(default: %(default)s)",
-    )
-    add_world_arguments(parser, "wang-laminar")
-    parser.add_argument(
-        "--component-id",
-        type=int,
-        default=MAV_COMP_ID_PERIPHERAL,
-        help="component id of the injected messages (default: %(default)s, MAV_COMP_ID_PERIPHERAL)",
-    )
-    parser.add_argument(
-        "--chem-rate", type=float, default=defaults.chem_rate_hz, help="CHEM Hz (default: %(default)s)"
-    )
-    parser.add_argument(
-        "--wind-rate",
-        type=float,
-        default=defaults.wind_rate_hz,
-        help="WIND Hz; 0 leaves the flow to SITL's windvane (default: %(default)s)",
-    )
-    parser.add_argument(
-        "--position-rate",
-        type=float,
-        default=defaults.position_rate_hz,
-        help="LOCAL_POSITION_NED Hz asked of SITL; 0 = do not ask (default: %(default)s)",
-    )
-    parser.add_argument(
-        "--speed",
-        type=float,
-        default=1.0,
-        help="simulated seconds per wall second: SITL's --speedup (default: 1)",
-    )
-    parser.add_argument(
-        "--write-config",
-        metavar="FILE",
-        default=None,
-        help="write the scenario's service configuration (for oslim serve --config FILE) and exit",
-    )
-    parser.add_argument(
-        "--service-url",
-        default="udpin:0.0.0.0:14550",
-        help="mavlink.url written by --write-config (default: %(default)s)",
-    )
-    return parser
 
 
 def _toml_value(value: Any, key: str) -> str:

@@ -30,9 +30,9 @@ from enum import StrEnum
 from types import MappingProxyType, ModuleType, TracebackType
 from typing import Any, Self
 
-from service import mavlink_dialect
-from service.errors import ConfigError, LinkError
-from service.signing import SigningCounters, enable_signing
+from service.core.errors import ConfigError, LinkError
+from service.edges import mavlink_dialect
+from service.edges.signing import SigningCounters, enable_signing
 from sim_bridge.autopilot import AUTOPILOTS, Autopilot, VehicleKind
 from sim_bridge.world import World
 

@@ -9,47 +9,13 @@ import logging
 import signal
 from typing import Any
 
-from service.signing import load_signing_key
-from sim_bridge.scenarios import add_world_arguments, build_world, load_scenario
+from service.edges.signing import load_signing_key
+from sim_bridge.scenarios import build_world, load_scenario
 from sim_bridge.stub import DEFAULT_RATES_HZ, Stream, StubOptions, VehicleStub
 
 log = logging.getLogger(__name__)
 
 _STATUS_PERIOD_S = 10.0
-
-
-def add_parser(subparsers: Any, name: str) -> argparse.ArgumentParser:
-    parser: argparse.ArgumentParser = subparsers.add_parser(
-        name,
-        help="run the MAVLink vehicle stub (a simulated ArduPilot vehicle in a scenario's world)",
-        description="A simulated ArduPilot rover (or sub) over MAVLink 2, driving in a scenario's "
-        "world: flow, filament plume and chemical detector.",
-    )
-    add_world_arguments(parser, "farrell2003")
-    parser.add_argument(
-        "--url",
-        default=StubOptions.url,
-        help="pymavlink connection string; udpout speaks first to a udpin service (default: %(default)s)",
-    )
-    parser.add_argument(
-        "--speed", type=float, default=1.0, help="simulated seconds per wall second (default: %(default)s)"
-    )
-    parser.add_argument("--system-id", type=int, default=1, help="MAVLink system id (default: %(default)s)")
-    parser.add_argument("--no-wind", action="store_true", help="do not stream WIND (ArduPilot's flow)")
-    parser.add_argument("--no-wind-cov", action="store_true", help="do not stream WIND_COV (PX4's flow)")
-    parser.add_argument("--chem-det", action="store_true", help="also stream NAMED_VALUE_INT detections")
-    parser.add_argument(
-        "--signing-key-file",
-        default=None,
-        help="MAVLink 2 signing key (32 bytes or 64 hex digits); sign and verify",
-    )
-    parser.add_argument(
-        "--duration-s",
-        type=float,
-        default=None,
-        help="stop after this many simulated seconds (default: run on)",
-    )
-    return parser
 
 
 def options_from_args(args: argparse.Namespace, sensor_name: str, kind: Any) -> StubOptions:

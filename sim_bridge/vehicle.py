@@ -20,8 +20,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from service.errors import ConfigError
-from service.grid import Rectangle
+from service.core.errors import ConfigError
+from service.core.grid import Rectangle
 
 _LEAST_TURN_SPEED = 0.25
 """The least share of cruise speed an AUV keeps in a turn (it needs way on to steer)."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from service.grid import Rectangle
+from service.core.grid import Rectangle
 from sim_bridge import vehicle as kinematics
 from sim_bridge.detector import BinaryDetector
 from sim_bridge.flow import FlowField, velocity_at

@@ -29,3 +29,16 @@ def test_ruff_format() -> None:
 def test_mypy_strict() -> None:
     result = run("mypy", *(arg for name in PACKAGES for arg in ("-p", name)))
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_import_contracts() -> None:
+    """The layers of DESIGN.md hold: the contracts in pyproject.toml's [tool.importlinter]."""
+    result = subprocess.run(
+        [str(Path(sys.executable).parent / "lint-imports")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "0 broken" in result.stdout

@@ -11,7 +11,7 @@ from typing import Any, TypeVar
 
 import pytest
 
-from service.mavlink_dialect import dialect, mavutil
+from service.edges.mavlink_dialect import dialect, mavutil
 from sim_bridge.stub import StubOptions, VehicleStub
 from sim_bridge.world import World
 

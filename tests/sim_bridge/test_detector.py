@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from service.errors import ConfigError
+from service.core.errors import ConfigError
 from sim_bridge.detector import BinaryDetector, DetectorParams
 
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from service.errors import ConfigError
+from service.core.errors import ConfigError
 from sim_bridge.flow import MeanderingFlow, SwitchedFlow, TurbulentFlow, UniformFlow, velocity_at
 
 

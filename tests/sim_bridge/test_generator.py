@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from service.errors import ConfigError
-from service.grid import Grid
+from service.core.errors import ConfigError
+from service.core.grid import Grid
 from sim_bridge.generator import (
     WorldClass,
     available_classes,
@@ -147,7 +147,7 @@ def test_an_auv_slows_to_turn_and_a_rover_pivots() -> None:
 
 
 def test_a_user_threshold_scales_the_plume() -> None:
-    from service.config import load_config
+    from service.core.config import load_config
 
     world_class = load_class(CLASSES["steady"])
     plain = draw_scenario(world_class, 4).scenario.world.plume.puff_mass

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from service.errors import ConfigError
+from service.core.errors import ConfigError
 from sim_bridge.flow import MeanderingFlow, UniformFlow
 from sim_bridge.plume import GaussianPlume, PuffParams, PuffPlume
 from sim_bridge.scenarios import build_world, load_scenario

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from service.errors import ConfigError
+from service.core.errors import ConfigError
 from sim_bridge.plume_bench import measure_plume
 
 

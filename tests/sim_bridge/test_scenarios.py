@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from service.errors import ConfigError
+from service.core.errors import ConfigError
 from sim_bridge.flow import MeanderingFlow, TurbulentFlow, UniformFlow, velocity_at
 from sim_bridge.scenarios import available_scenarios, build_world, load_scenario, place
 

@@ -14,9 +14,9 @@ from typing import Any
 
 import pytest
 
-from service.config import load_config
-from service.errors import ConfigError
-from service.mavlink_dialect import dialect
+from service.core.config import load_config
+from service.core.errors import ConfigError
+from service.edges.mavlink_dialect import dialect
 from sim_bridge.scenarios import build_world, load_scenario
 from sim_bridge.sitl_bridge import BridgeOptions, Endpoint, Scheme, SitlBridge, wind_fields
 from sim_bridge.sitl_bridge_command import config_toml
@@ -265,7 +265,7 @@ def test_nothing_lost_under_load_while_injecting() -> None:
 
 def stub_rig(bridge_world: World, talk: Callable[[Any, VehicleStub, SitlBridge], Any]) -> Any:
     """The stub as SITL (no WIND, no CHEM of its own), the bridge, and a pymavlink companion."""
-    from service.mavlink_dialect import mavutil
+    from service.edges.mavlink_dialect import mavutil
 
     sitl_port, service_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
     rates = {

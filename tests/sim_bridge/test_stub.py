@@ -11,8 +11,8 @@ from typing import Any
 
 import pytest
 
-from service.errors import ConfigError
-from service.mavlink_dialect import dialect
+from service.core.errors import ConfigError
+from service.edges.mavlink_dialect import dialect
 from sim_bridge.scenarios import build_world, load_scenario
 from sim_bridge.stub import Stream, StubOptions, VehicleStub
 from sim_bridge.world import World

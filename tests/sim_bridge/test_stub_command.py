@@ -3,27 +3,22 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 import threading
 from typing import Any
 
-from service.cli import COMMANDS
+from service.cli import build_parser
 from sim_bridge import stub_command
-from sim_bridge.stub import Stream
+from sim_bridge.stub import Stream, StubOptions
 
 
 def parse(*argv: str) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="oslim")
-    sub = parser.add_subparsers(dest="command", required=True)
-    stub_command.add_parser(sub, "stub")
-    return parser.parse_args(["stub", *argv])
+    return build_parser("stub").parse_args(["stub", *argv])
 
 
 def test_registered_as_the_stub_subcommand() -> None:
-    module = importlib.import_module(COMMANDS["stub"])
-    assert module is stub_command
-    assert callable(module.add_parser)
-    assert callable(module.run)
+    args = parse()
+    assert args.command == "stub"
+    assert (args.scenario, args.url) == ("farrell2003", StubOptions.url)
 
 
 def test_options_follow_the_flags() -> None:

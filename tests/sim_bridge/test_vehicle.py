@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from service.errors import ConfigError
+from service.core.errors import ConfigError
 from sim_bridge.vehicle import VehicleParams, VehicleState, segment_hits, step, wrap_angle
 
 EAST, NORTH, SOUTH = 0.0, math.pi / 2, -math.pi / 2

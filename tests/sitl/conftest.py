@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from service.mavlink_dialect import dialect, mavutil
+from service.edges.mavlink_dialect import dialect, mavutil
 
 MAV = dialect()
 REPO = Path(__file__).resolve().parents[2]

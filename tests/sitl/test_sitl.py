@@ -14,9 +14,9 @@ from typing import Any
 
 import pytest
 
-from service.app import Service
-from service.config import Config, load_config
-from service.sim import within_one_cell
+from service.app.service import Service
+from service.core.config import Config, load_config
+from service.tools.sim import within_one_cell
 from sim_bridge.scenarios import build_world, load_scenario
 from sim_bridge.sitl_bridge import BridgeOptions, SitlBridge
 
@@ -69,7 +69,7 @@ async def until(condition: Callable[[], bool], timeout_s: float, what: str) -> N
 
 
 def received(service: Service, kind: str) -> int:
-    link = service._link
+    link = service.edges.link if service.edges is not None else None
     return 0 if link is None else link.counters.by_type.get(kind, 0)
 
 

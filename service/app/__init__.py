@@ -1,0 +1,1 @@
+"""The application: the ``Service`` that runs the core between its edges (``service.app.service``)."""

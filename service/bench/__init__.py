@@ -1,1 +1,0 @@
-"""Benchmarks runnable by anyone: ``oslim bench mapping|plume|search``."""

@@ -1,0 +1,181 @@
+"""The single-filament model shared by the Bayesian and POMDP mappers.
+
+Seed reactive-planning §II-A/B (eq. 1-4) and seed pomdp-astar §II-C eq. 1. A filament released
+from a source at X_i at time t_l drifts with the flow record and random-walks with variance
+(t_k - t_l) sigma^2 per axis, so at t_k it is at X_i + V(t_l, t_k) + W with
+V(t_l, t_k) = sum_{i=l}^{k-1} U dt (reactive-planning eq. 4) and W ~ N(0, (t_k - t_l) sigma^2).
+The probability that it is in the vehicle's cell C_j now, p_ij(t_l, t_k), is separable:
+p_ij = p_y(row of C_i) p_x(column of C_i).
+
+Eq. 1 of pomdp-astar evaluates the Gaussian density at the cell centres and multiplies by the
+cell area L_x L_y (the midpoint rule); that exceeds 1 for short lags when a cell is large compared
+with sigma sqrt(t_k - t_l). We use the exact Gaussian mass over the cell instead, a difference of
+normal CDFs across the cell's extent: it is equally separable, always in [0, 1], and equals eq. 1
+to first order when the cell is small compared with the spread.
+
+Drift uncertainty (ours, off by default): V is the flow record *at the vehicle*, but in a flow that
+varies in space (seed hmm-plume-mapping §V, a meandering plume) a filament elsewhere drifted with
+a different flow. With ``drift_spread`` = k > 0 each axis gets, besides the random walk, a drift
+error whose standard deviation grows linearly with the lag, k s tau, where s (m/s) is the standard
+deviation of that flow component over the window (so |u| times the spread of the flow direction
+across the flow, the std of the speed along it). The spread of eq. 4 per axis then becomes
+
+    s_tau = sqrt(sigma^2 tau + (k s tau)^2)                                  (drift-spread eq. D1)
+
+The error is taken as fully correlated over the lag (a meander persists), hence linear in tau
+rather than the random walk's sqrt(tau); the axes stay independent, so p_ij stays separable.
+
+A release older than the service (ours): a source has usually been releasing long before the
+vehicle arrives, and the flow before the first tick is unknown, not absent. Counting only the
+releases since the service started would let a plume reach only as far downflow as the flow has
+run since then (20 m after 20 s at 1 m/s), so an early detection would put the source next to the
+vehicle. ``prehistory`` therefore continues the record back in time with the mean step of the
+record (its mean flow), until the oldest release has drifted ``reach_m`` (the area's diagonal:
+every source in the area is in reach) or ``MAX_RELEASES`` release times are counted.
+
+Release times are one per flow-history entry: the filament released at the start of the newest
+entry has lag dt_newest and drift (dx, dy)_newest, the one before it the cumulative sums of the
+two newest entries, and so on back through the window. Rows of every stacked array below are
+ordered newest release first (shortest lag first).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.special import ndtr
+
+from service.core.mapping.belief import FloatArray
+
+if TYPE_CHECKING:
+    from service.core.grid import Grid
+    from service.core.mapping.mapper import FlowStep
+
+
+MAX_RELEASES = 600
+"""Most release times a prehistory extends the record to (bounds the work per tick)."""
+
+
+def release_offsets(
+    history: Iterable[FlowStep], reach_m: float = 0.0
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Lag t_k - t_l (s) and drift V(t_l, t_k) (m, x and y) of each release time, newest first;
+    with ``reach_m`` > 0 the record is continued with its mean step (the prehistory) until the
+    oldest release has drifted that far."""
+    steps = list(history)[::-1]
+    dt = np.fromiter((s.dt_s for s in steps), dtype=float, count=len(steps))
+    dx = np.fromiter((s.dx_m for s in steps), dtype=float, count=len(steps))
+    dy = np.fromiter((s.dy_m for s in steps), dtype=float, count=len(steps))
+    lag, drift_x, drift_y = np.cumsum(dt), np.cumsum(dx), np.cumsum(dy)
+    if reach_m <= 0.0 or not steps:
+        return lag, drift_x, drift_y
+    step_m = math.hypot(float(dx.mean()), float(dy.mean()))
+    reached_m = math.hypot(float(drift_x[-1]), float(drift_y[-1]))
+    if step_m <= 0.0 or reached_m >= reach_m:
+        return lag, drift_x, drift_y
+    extra = min(math.ceil((reach_m - reached_m) / step_m), MAX_RELEASES - len(steps))
+    if extra <= 0:
+        return lag, drift_x, drift_y
+    # the prehistory: before the record, the record's mean step, again and again
+    k = np.arange(1, extra + 1, dtype=float)
+    return (
+        np.concatenate([lag, lag[-1] + k * dt.mean()]),
+        np.concatenate([drift_x, drift_x[-1] + k * dx.mean()]),
+        np.concatenate([drift_y, drift_y[-1] + k * dy.mean()]),
+    )
+
+
+def flow_spread(history: Iterable[FlowStep]) -> tuple[float, float]:
+    """Standard deviation (m/s) of the flow's x and y components over ``history``, each tick
+    weighted by its duration; (0, 0) with fewer than two ticks."""
+    steps = list(history)
+    if len(steps) < 2:
+        return 0.0, 0.0
+    dt = np.fromiter((s.dt_s for s in steps), dtype=float, count=len(steps))
+    ux = np.fromiter((s.dx_m for s in steps), dtype=float, count=len(steps)) / dt
+    uy = np.fromiter((s.dy_m for s in steps), dtype=float, count=len(steps)) / dt
+    weights = dt / dt.sum()
+    sx = float(np.sqrt(np.dot(weights, (ux - np.dot(weights, ux)) ** 2)))
+    sy = float(np.sqrt(np.dot(weights, (uy - np.dot(weights, uy)) ** 2)))
+    return sx, sy
+
+
+def axis_cell_mass(edges: FloatArray, centre: FloatArray, spread: FloatArray) -> FloatArray:
+    """Mass of N(centre_l, spread_l^2) between consecutive ``edges``, shape (W, len(edges) - 1).
+
+    Each CDF value is taken from the nearer tail (F = Phi(z) - [z > 0]) so that the difference
+    keeps full relative precision far out in either tail; the cell that straddles the centre
+    gets the 1 back. A zero spread is a point mass (half to each side of an edge it sits on).
+    """
+    offset = edges[None, :] - centre[:, None]
+    z = np.copysign(np.inf, offset)
+    z[offset == 0.0] = 0.0
+    np.divide(offset, spread[:, None], out=z, where=spread[:, None] > 0.0)
+    tail = ndtr(-np.abs(z))
+    upper = z > 0.0
+    below = np.where(upper, -tail, tail)
+    mass: FloatArray = np.diff(below, axis=1) + np.diff(upper.astype(float), axis=1)
+    return np.clip(mass, 0.0, 1.0)
+
+
+def filament_factors(
+    grid: Grid,
+    x_m: float,
+    y_m: float,
+    lag_s: FloatArray,
+    drift_x_m: FloatArray,
+    drift_y_m: FloatArray,
+    sigma_x: float,
+    sigma_y: float,
+    drift_sd_x_mps: float = 0.0,
+    drift_sd_y_mps: float = 0.0,
+) -> tuple[FloatArray, FloatArray]:
+    """Per-axis factors Px (W, m), Py (W, n) of p_ij(t_l, t_k) for a vehicle cell centred at (x, y).
+
+    ``Py[l, row] * Px[l, col]`` is the probability that a filament released at release time l
+    from a source in cell (row, col) is in the vehicle's cell now: the mass over cell C_i of the
+    source position of eq. 4, X_s ~ N(X_j - V(t_l, t_k), (t_k - t_l) sigma^2), which is the same
+    as the mass of the filament over C_j (pomdp-astar eq. 1, exact per cell rather than midpoint).
+    ``drift_sd_*_mps`` (k s of eq. D1, m/s) widen it by a drift error growing linearly with the lag.
+    """
+    x_edges: FloatArray = grid.x_min + np.arange(grid.columns + 1, dtype=np.float64) * grid.cell_width_m
+    y_edges: FloatArray = grid.y_min + np.arange(grid.rows + 1, dtype=np.float64) * grid.cell_height_m
+    # reactive-planning eq. 4: X_s = X_j - V(t_l, t_k) - W(t_l, t_k), W's spread per eq. D1
+    # (hypot(a, 0) is exactly a: with no drift error the papers' spread, bit for bit)
+    root_lag = np.sqrt(lag_s)
+    spread_x = np.hypot(sigma_x * root_lag, drift_sd_x_mps * lag_s)
+    spread_y = np.hypot(sigma_y * root_lag, drift_sd_y_mps * lag_s)
+    px = axis_cell_mass(x_edges, x_m - drift_x_m, spread_x)
+    py = axis_cell_mass(y_edges, y_m - drift_y_m, spread_y)
+    return px, py
+
+
+def history_factors(
+    grid: Grid,
+    cell: int,
+    history: Iterable[FlowStep],
+    sigma_x: float,
+    sigma_y: float,
+    *,
+    zero_lag: bool = False,
+    drift_spread: float = 0.0,
+    reach_m: float = 0.0,
+) -> tuple[FloatArray, FloatArray]:
+    """``filament_factors`` for flat cell ``cell`` over every release time in ``history``; with
+    ``zero_lag`` also the release of this very tick (lag 0, still at its source: the first row);
+    ``drift_spread`` is k of eq. D1 (0: the papers' model); ``reach_m`` > 0 adds the prehistory."""
+    steps = list(history)
+    lag, drift_x, drift_y = release_offsets(steps, reach_m)
+    sd_x, sd_y = flow_spread(steps) if drift_spread > 0.0 else (0.0, 0.0)
+    if zero_lag:
+        # a continuous source has odour at its own position now; the papers' releases stop at the
+        # previous tick, so a vehicle in the source's cell would need last tick's filament not to
+        # have left the cell (it often has, at 1 m/s in a 2.5 m cell) to expect a detection
+        lag, drift_x, drift_y = (np.concatenate([[0.0], a]) for a in (lag, drift_x, drift_y))
+    x, y = grid.centre(cell)
+    return filament_factors(
+        grid, x, y, lag, drift_x, drift_y, sigma_x, sigma_y, drift_spread * sd_x, drift_spread * sd_y
+    )

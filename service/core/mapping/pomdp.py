@@ -1,0 +1,116 @@
+"""POMDP source mapping (seed pomdp-astar, Wang and Pang, §II-C, eq. 1-6).
+
+The source is static (eq. 4), so the belief update eq. 5 reduces to Bayes' rule with the
+observation probability of eq. 3: for a vehicle in C_j, a source in C_i leaves no detectable
+filament there with probability gamma_ij = prod_l (1 - mu p_ij(t_l, t_k)) over the window
+(eq. 2), and b(c_i) is multiplied by 1 - gamma_ij on a detection and by gamma_ij on a
+non-detection, then normalised (eq. 6). With a false-alarm rate pf the detector also fires with
+no odour, so P(d | i) = 1 - (1 - pf) gamma_ij and P(no d | i) = (1 - pf) gamma_ij.
+
+p_ij is separable (``filament``), but the product over release times is not. ``log_non_detection``
+therefore splits log gamma = sum_l log1p(-mu px_l py_l) by release time: a lag whose largest term
+x = mu px_l py_l is small uses the series log(1 - x) = -sum_k x^k / k, whose every term is a rank-one
+outer product, so all such lags together cost one matrix product; a lag with a large x (short lags,
+where the filament is concentrated) is evaluated directly, but only over the box where px_l and
+py_l are non-negligible.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from service.core.mapping.belief import FloatArray
+from service.core.mapping.mapper import ObservationModelMapper
+
+SERIES_TOLERANCE = 1e-12
+"""Bound on the truncation error of log gamma per release time (so about window x this in all)."""
+MAX_SERIES_TERMS = 12
+"""A lag that needs more terms than this is evaluated directly over its support box."""
+SUPPORT_FLOOR = 1e-18
+"""Per-axis filament probabilities below this are left out of a direct lag's box."""
+DIRECT_COST_RATIO = 100.0
+"""Cost of one directly evaluated log1p element relative to one multiply-add of a matrix product."""
+WHOLE_DIRECT_SIZE = 50_000
+"""Up to this many (release time, cell) pairs, eq. 2 is evaluated directly in one vectorised pass."""
+
+
+def series_terms(peak: FloatArray, tolerance: float = SERIES_TOLERANCE) -> npt.NDArray[np.intp]:
+    """Terms K of -sum_{k<=K} x^k / k needed for |error| <= tolerance when 0 <= x <= peak; 0 if more
+    than MAX_SERIES_TERMS would be needed.
+
+    The remainder sum_{k>K} x^k / k is at most peak^(K+1) / (1 - peak), so K + 1 >=
+    log(tolerance (1 - peak)) / log(peak) suffices.
+    """
+    small = np.clip(peak, np.finfo(float).tiny, 0.5)
+    needed = np.ceil(np.log(tolerance * (1.0 - small)) / np.log(small)) - 1.0
+    terms = np.maximum(needed, 1.0).astype(np.intp)
+    terms[(peak > 0.5) | (terms > MAX_SERIES_TERMS)] = 0
+    return terms
+
+
+def _support(values: FloatArray) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """First and one-past-last index of each row's entries above SUPPORT_FLOOR (unimodal rows)."""
+    above = values > SUPPORT_FLOOR
+    width = values.shape[1]
+    first = np.argmax(above, axis=1)
+    last = width - np.argmax(above[:, ::-1], axis=1)
+    return first, np.where(above.any(axis=1), last, first)
+
+
+def log_non_detection(px: FloatArray, py: FloatArray, mu: float) -> FloatArray:
+    """log gamma_ij (eq. 2) from the stacked factors Px (W, m) and Py (W, n), shape (n, m)."""
+    out = np.zeros((py.shape[1], px.shape[1]))
+    if px.shape[0] * out.size <= WHOLE_DIRECT_SIZE:
+        with np.errstate(divide="ignore"):
+            whole: FloatArray = np.log1p(-mu * py[:, :, None] * px[:, None, :]).sum(axis=0, out=out)
+        return whole
+    peak = mu * px.max(axis=1, initial=0.0) * py.max(axis=1, initial=0.0)
+    terms = series_terms(peak)
+    c0, c1 = _support(px)
+    r0, r1 = _support(py)
+    box = (c1 - c0) * (r1 - r0)
+    direct = (peak > 0.0) & ((terms == 0) | (box * DIRECT_COST_RATIO < terms * out.size))
+    series = (peak > 0.0) & ~direct
+
+    # eq. 2 by series: sum_l log(1 - mu px_l py_l) = -sum_l sum_k (mu^k / k) py_l^k (x) px_l^k
+    ys, xs = [], []
+    lag_y, lag_x = py[series], px[series]
+    power_y, power_x = lag_y, lag_x
+    for k in range(1, int(terms[series].max(initial=0)) + 1):
+        keep = terms[series] >= k
+        ys.append(power_y[keep] * (mu**k / k))
+        xs.append(power_x[keep])
+        power_y, power_x = power_y * lag_y, power_x * lag_x
+    if ys:
+        out -= np.concatenate(ys).T @ np.concatenate(xs)
+
+    # eq. 2 directly over each concentrated lag's support box; mu px py = 1 gives log 0 = -inf
+    with np.errstate(divide="ignore"):
+        for lag in np.flatnonzero(direct):
+            rows, cols = slice(r0[lag], r1[lag]), slice(c0[lag], c1[lag])
+            out[rows, cols] += np.log1p(-mu * np.outer(py[lag, rows], px[lag, cols]))
+    return out
+
+
+class PomdpMapper(ObservationModelMapper):
+    name: ClassVar[str] = "pomdp"
+
+    def log_gamma(self, cell: int) -> FloatArray:
+        """log gamma_ij (eq. 2) for a vehicle in flat cell ``cell``, over the window, shape (n, m)."""
+        p = self.params
+        px, py = self._filament_factors(cell)
+        return log_non_detection(px, py, p.mu)
+
+    def _event_probability(self, cell: int, detected: bool) -> FloatArray:
+        """O(d) = 1 - (1 - pf) gamma' or O(no d) = (1 - pf) gamma' (eq. 3 with false alarms), where
+        gamma' = r + (1 - r) gamma with r the miss floor (gamma' = gamma, the paper's, for r = 0)."""
+        p = self.params
+        log_gamma = self.log_gamma(cell)
+        if p.miss_floor > 0.0:
+            log_gamma = np.log(p.miss_floor + (1.0 - p.miss_floor) * np.exp(log_gamma))
+        log_miss = np.log1p(-p.false_alarm) + log_gamma
+        out: FloatArray = -np.expm1(log_miss) if detected else np.exp(log_miss)
+        return out

@@ -1,0 +1,91 @@
+"""Coordinates along and across the flow, shared by the zigzag and the cast.
+
+``along`` grows in the direction the flow moves toward (downflow); ``cross`` grows to the left
+of it. Turning patterns are laid out in these coordinates and clipped to the hull of the cell
+centres, so every vertex lies strictly inside the search area.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from service.core.planning.base import Waypoint
+
+if TYPE_CHECKING:
+    from service.core.grid import Grid
+
+CALM_MPS = 1e-6
+"""Below this flow speed there is no flow direction; ``FlowFrame.from_flow`` uses the fallback."""
+
+
+@dataclass(frozen=True)
+class FlowFrame:
+    """Unit vector (ux, uy) pointing downflow; the cross axis is (-uy, ux)."""
+
+    ux: float
+    uy: float
+
+    def __post_init__(self) -> None:
+        if not math.isclose(math.hypot(self.ux, self.uy), 1.0, rel_tol=1e-9):
+            raise ValueError(f"flow frame needs a unit vector, got ({self.ux}, {self.uy})")
+
+    @classmethod
+    def from_flow(cls, flow_x: float, flow_y: float, fallback: FlowFrame | None = None) -> FlowFrame:
+        """The frame of a flow vector; ``fallback`` (default: flow toward East) in calm water."""
+        speed = math.hypot(flow_x, flow_y)
+        if not math.isfinite(speed) or speed < CALM_MPS:
+            return fallback if fallback is not None else cls(1.0, 0.0)
+        return cls(flow_x / speed, flow_y / speed)
+
+    def along(self, x: float, y: float) -> float:
+        return x * self.ux + y * self.uy
+
+    def cross(self, x: float, y: float) -> float:
+        return -x * self.uy + y * self.ux
+
+    def point(self, along: float, cross: float) -> Waypoint:
+        return Waypoint(along * self.ux - cross * self.uy, along * self.uy + cross * self.ux)
+
+    def angle_to(self, other: FlowFrame) -> float:
+        """Unsigned angle between two flow directions, radians."""
+        dot = max(-1.0, min(1.0, self.ux * other.ux + self.uy * other.uy))
+        return math.acos(dot)
+
+
+def centre_hull(grid: Grid) -> tuple[float, float, float, float]:
+    """(x_lo, y_lo, x_hi, y_hi): the rectangle spanned by the cell centres."""
+    return (
+        float(grid.x_centres[0]),
+        float(grid.y_centres[0]),
+        float(grid.x_centres[-1]),
+        float(grid.y_centres[-1]),
+    )
+
+
+def along_range(grid: Grid, frame: FlowFrame) -> tuple[float, float]:
+    """Least and greatest along-flow coordinate over the centre hull."""
+    x0, y0, x1, y1 = centre_hull(grid)
+    values = [frame.along(x, y) for x in (x0, x1) for y in (y0, y1)]
+    return min(values), max(values)
+
+
+def cross_section(grid: Grid, frame: FlowFrame, along: float) -> tuple[float, float] | None:
+    """The cross-flow interval [lo, hi] of the line at ``along`` inside the centre hull, or None."""
+    x0, y0, x1, y1 = centre_hull(grid)
+    lo, hi = -math.inf, math.inf
+    # point(along, s) = (along ux - s uy, along uy + s ux); each axis bounds s
+    for base, slope, low, high in (
+        (along * frame.ux, -frame.uy, x0, x1),
+        (along * frame.uy, frame.ux, y0, y1),
+    ):
+        if abs(slope) < 1e-12:
+            if not low - 1e-9 <= base <= high + 1e-9:
+                return None
+            continue
+        a, b = (low - base) / slope, (high - base) / slope
+        lo, hi = max(lo, min(a, b)), min(hi, max(a, b))
+    if lo > hi + 1e-9:
+        return None
+    return lo, max(lo, hi)

@@ -1,0 +1,271 @@
+"""Source declaration: when the mission stops and names the source cell.
+
+Two rules, each enabled by ``declaration.rules``:
+
+``stable`` (seed pomdp-astar §II-D): "The chemical source is declared to be found if the source
+likelihood map converges, i.e., the estimated source location produced from the source
+likelihood map does not change over 30 seconds" (``stable_s``).
+
+``mass``: at least ``probability`` of the map's mass lies in cells whose centres are within
+``radius_m`` of the estimated cell's centre. Unlike the stable rule it looks at how peaked the
+map is, so it neither waits out a map that is already sure nor declares a flat map whose argmax
+happens not to move.
+
+Both rules are gated by a visit: a rule only fires while the vehicle is within
+``visit_radius_m`` of the estimated cell's centre (when the mission passes the vehicle's
+position). A map fed only by detections far downflow is peaked across the flow but not along
+it: every cell upflow of the detections within the flow-history window explains them, and the
+argmax can sit still, or gather mass, anywhere along that line. Only observations at the
+estimate itself (odour just downflow of a true source, none just upflow of it) tell the cells
+of that line apart, so the vehicle has to have reached the estimate before it is named.
+
+With ``confirm_s`` > 0 a rule must keep firing, for the same estimated cell and with the
+vehicle staying near it, for that long before the source is declared. In a flow that varies in
+space (seed hmm-plume-mapping's meandering plume) the mappers' flow record, taken at the vehicle,
+does not say where the plume went: when it swings off the vehicle's line, the odour stops as it
+would upflow of a source, and the map names the place where it stopped. Waiting about one
+correlation time of the meander lets the plume swing back (odour upflow moves the estimate on).
+
+With ``upflow_pass_m`` > 0 a rule also waits until the vehicle has been at least that far upflow
+of the estimated cell's centre (along the mean flow, and within ``visit_radius_m`` of the line
+through the centre across it) since that cell became the estimate. Odour at the estimate is
+explained as well by a source there as by any source upflow; in a flow that varies in space the
+mappers' drift lines from successive detections meet near the vehicle, so a map can gather its
+mass where the vehicle is while it is still in the plume, far downflow of the source. Only a look
+upflow tells them apart: odour there moves the estimate on (and restarts the wait), none there
+leaves it. The mission's trace behaviour probes the upflow neighbour whenever the vehicle is at
+the estimate, so the pass comes without a change of planner.
+
+With ``persist_s`` > 0 no rule fires until odour has been detected within ``visit_radius_m`` of
+the estimated cell's centre at two times at least ``persist_s`` apart. A source keeps releasing
+where it is, so odour comes back to it however the plume meanders; where a meandering plume has
+swung away, odour was there only while it passed. The guard does not depend on how the vehicle
+looks upflow, so the probe can be made to complete the upflow pass (``probe_to_pass``, in the
+mission) without the wrong declarations that easing the pass otherwise brings.
+
+With ``steady_hit_rate`` > 0 the mission may skip the check across the flow (``check_width_m``)
+when the odour near the estimate has been steady (``steady_odour``). A source releases all the
+time where it is, so a vehicle kept near it smells it in most ticks; a meander that swung the
+plume over a place leaves odour there only part of the time. The look across the flow is what
+tells a swung plume from a source, and it costs about 24 s at 1 m/s: where the odour has been
+steady for long enough, under a flow that has not just turned, it is taken as the answer.
+
+The estimate is the cell of greatest likelihood (the mapper's ``estimate``); ties go to the
+lowest flat index, as ``numpy.argmax`` does.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from service.core.config import DeclarationRule
+
+if TYPE_CHECKING:
+    from service.core.config import DeclarationConfig
+    from service.core.grid import Grid
+    from service.core.mapping.belief import FloatArray
+    from service.core.observation import Observation
+
+
+@dataclass(frozen=True)
+class Declaration:
+    """A declared source: the flat cell, the papers' cell number, its centre, its likelihood, the
+    mass within the radius, and every rule that fired (in configuration order)."""
+
+    time_s: float
+    cell: int
+    paper_cell: int
+    x: float
+    y: float
+    probability: float
+    mass: float
+    rules: tuple[DeclarationRule, ...]
+
+    def __post_init__(self) -> None:
+        if not self.rules:
+            raise ValueError("a declaration names at least one rule")
+
+
+def steady_odour(
+    samples: Sequence[Observation],
+    x: float,
+    y: float,
+    first_odour_s: float | None,
+    flow_direction: tuple[float, float],
+    config: DeclarationConfig,
+) -> bool:
+    """Whether the odour at (x, y) has been steady enough to name it without the check across the
+    flow: over the last ``steady_window_s`` the vehicle spent at least ``steady_min_ticks`` ticks
+    within ``steady_radius_m`` of it and smelled odour in at least ``steady_hit_rate`` of them,
+    the first and last of those at least ``steady_min_span_s`` apart;
+    the mission's first odour came at least ``steady_min_contact_s`` ago; and the flow of the last
+    ``steady_turn_window_s`` has turned, on average, no more than ``steady_max_turn_deg`` from
+    ``flow_direction`` (the mean flow, a unit vector). ``samples`` are the mission's ticks in time
+    order, the newest last (this tick). Always False with ``steady_hit_rate`` 0."""
+    c = config
+    if c.steady_hit_rate <= 0.0 or not samples or first_odour_s is None:
+        return False
+    now = samples[-1].time_s
+    if now - first_odour_s < c.steady_min_contact_s - 1e-9:
+        return False
+    near = [
+        s
+        for s in samples
+        if s.time_s > now - c.steady_window_s and math.hypot(s.x - x, s.y - y) < c.steady_radius_m
+    ]
+    odour = [s.time_s for s in near if s.detected]
+    if len(near) < c.steady_min_ticks or len(odour) < c.steady_hit_rate * len(near) - 1e-9:
+        return False
+    if max(odour) - min(odour) < c.steady_min_span_s - 1e-9:
+        return False
+    ux, uy = flow_direction
+    turns = [
+        math.atan2(s.flow_y * ux - s.flow_x * uy, s.flow_x * ux + s.flow_y * uy)
+        for s in samples
+        if s.time_s > now - c.steady_turn_window_s
+    ]
+    return abs(math.degrees(sum(turns) / len(turns))) <= c.steady_max_turn_deg
+
+
+def mass_within(grid: Grid, likelihood: FloatArray, cell: int, radius_m: float) -> float:
+    """Sum of the likelihood over cells whose centre lies within ``radius_m`` of ``cell``'s centre."""
+    cx, cy = grid.centre(cell)
+    dx2 = (grid.x_centres - cx) ** 2
+    dy2 = (grid.y_centres - cy) ** 2
+    inside = dy2[:, None] + dx2[None, :] <= radius_m**2 * (1.0 + 1e-12)
+    return float(likelihood[inside].sum())
+
+
+class Declarer:
+    """Keeps the stable rule's clock and checks both rules once per tick after ``arm``.
+
+    ``admit`` (flat cell -> bool), when given, is asked last: a rule that fires for a cell it
+    refuses is ignored. The benchmark's perfect guard (``oslim bench search
+    --oracle-declaration``) admits only cells within one cell of the true source, to measure how
+    much success the declaration's guards cost; a mission on a vehicle never has one."""
+
+    def __init__(
+        self, grid: Grid, config: DeclarationConfig, admit: Callable[[int], bool] | None = None
+    ) -> None:
+        self.grid = grid
+        self.config = config
+        self._admit = admit
+        self._cell: int | None = None
+        self._since_s = 0.0
+        self._firing_since_s: float | None = None  # since when a rule fires for self._cell
+        self._passed_upflow = False  # the vehicle has been upflow_pass_m upflow of self._cell
+        self._odour: list[tuple[float, float, float]] = []  # detections (t, x, y), for persist_s
+
+    @property
+    def passed_upflow(self) -> bool:
+        """Whether the vehicle has made the upflow pass of the current estimate."""
+        return self._passed_upflow
+
+    @property
+    def armed(self) -> bool:
+        return self._cell is not None
+
+    def arm(self, time_s: float, likelihood: FloatArray) -> None:
+        """Start judging at ``time_s`` (the first detection): the stable clock starts now."""
+        self._cell = int(np.argmax(likelihood))
+        self._since_s = time_s
+        self._firing_since_s = None
+        self._passed_upflow = False
+
+    def update(
+        self,
+        time_s: float,
+        likelihood: FloatArray,
+        vehicle_m: tuple[float, float] | None = None,
+        flow: tuple[float, float] | None = None,
+        detected: bool = False,
+    ) -> Declaration | None:
+        """The declaration if an enabled rule fires at this tick, else None (always None unarmed).
+        With ``vehicle_m`` (x, y), nothing fires while the vehicle is farther than
+        ``visit_radius_m`` from the estimated cell's centre. With ``upflow_pass_m`` > 0, nothing
+        fires until the vehicle (``vehicle_m``) has been that far upflow of the centre against
+        ``flow`` (the mean flow direction, any length); without both, never. With ``persist_s``
+        > 0, nothing fires until ``detected`` ticks (odour at ``vehicle_m``) near the estimate
+        span that long."""
+        if self._cell is None:
+            return None
+        if detected and vehicle_m is not None and self.config.persist_s > 0.0:
+            self._odour.append((time_s, *vehicle_m))
+        cell = int(np.argmax(likelihood))
+        if cell != self._cell:
+            self._cell, self._since_s = cell, time_s
+            self._firing_since_s = None
+            self._passed_upflow = False
+        if self.config.upflow_pass_m > 0.0:
+            self._passed_upflow = self._passed_upflow or self._is_upflow(cell, vehicle_m, flow)
+            if not self._passed_upflow:
+                self._firing_since_s = None
+                return None
+        if vehicle_m is not None:
+            cx, cy = self.grid.centre(cell)
+            if math.hypot(vehicle_m[0] - cx, vehicle_m[1] - cy) > self.config.visit_radius_m:
+                self._firing_since_s = None
+                return None
+        mass = mass_within(self.grid, likelihood, cell, self.config.radius_m)
+        fired = {
+            # the tolerance keeps ticks like 0.1 s summed in floating point from missing the mark
+            DeclarationRule.STABLE: time_s - self._since_s >= self.config.stable_s - 1e-9,
+            DeclarationRule.MASS: mass >= self.config.probability,
+        }
+        rules = tuple(dict.fromkeys(r for r in self.config.rules if fired[r]))
+        if rules and not self._odour_persists(cell):
+            rules = ()
+        if rules and self._admit is not None and not self._admit(cell):
+            rules = ()
+        if not rules:
+            self._firing_since_s = None
+            return None
+        if self._firing_since_s is None:
+            self._firing_since_s = time_s
+        if time_s - self._firing_since_s < self.config.confirm_s - 1e-9:
+            return None
+        x, y = self.grid.centre(cell)
+        return Declaration(
+            time_s=time_s,
+            cell=cell,
+            paper_cell=self.grid.paper_number(cell),
+            x=x,
+            y=y,
+            probability=float(likelihood.flat[cell]),
+            mass=mass,
+            rules=rules,
+        )
+
+    def _odour_persists(self, cell: int) -> bool:
+        """Whether odour was detected within ``visit_radius_m`` of ``cell``'s centre at two times at
+        least ``persist_s`` apart (always, with ``persist_s`` 0). A source keeps releasing where it
+        is; a plume that swung away leaves odour at a place only while it passes."""
+        persist = self.config.persist_s
+        if persist <= 0.0:
+            return True
+        cx, cy = self.grid.centre(cell)
+        r = self.config.visit_radius_m
+        times = [t for t, x, y in self._odour if math.hypot(x - cx, y - cy) <= r]
+        return bool(times) and max(times) - min(times) >= persist - 1e-9
+
+    def _is_upflow(
+        self, cell: int, vehicle_m: tuple[float, float] | None, flow: tuple[float, float] | None
+    ) -> bool:
+        """Whether the vehicle is ``upflow_pass_m`` or more upflow of ``cell``'s centre and within
+        ``visit_radius_m`` of the flow line through it."""
+        if vehicle_m is None or flow is None:
+            return False
+        speed = math.hypot(*flow)
+        if speed == 0.0:
+            return False
+        ux, uy = flow[0] / speed, flow[1] / speed
+        cx, cy = self.grid.centre(cell)
+        dx, dy = vehicle_m[0] - cx, vehicle_m[1] - cy
+        upflow_m = -(dx * ux + dy * uy)
+        across_m = abs(dx * uy - dy * ux)
+        return upflow_m >= self.config.upflow_pass_m - 1e-9 and across_m <= self.config.visit_radius_m

@@ -1,0 +1,79 @@
+"""One mapping tick from the samples that arrived during it (seed hmm-plume-mapping §III-A).
+
+The mapper runs at a lower rate than the sensors: it takes the mean flow over the tick's samples
+(eq. 1-2) and the peak chemical reading (so no detection event is missed), thresholded. A tick
+with no position, no flow or no chemical reading gives no observation: nothing is invented, and
+the gap is reported so it can be logged and recorded.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from service.core.observation import Observation
+from service.core.samples import ChemSample, DetectionSample, FlowSample, Position
+
+
+@dataclass(frozen=True)
+class Tick:
+    time_s: float
+    observation: Observation | None
+    gaps: tuple[str, ...]
+    samples: int
+    """Position, flow and chemical samples that went into this tick."""
+
+
+@dataclass
+class TickAggregator:
+    """Collects one tick's samples; ``close`` turns them into an Observation and starts anew."""
+
+    threshold: float
+    max_position_age_s: float = 2.0
+    _flows: list[FlowSample] = field(default_factory=list)
+    _chem_max: float | None = None
+    _detected: bool | None = None
+    _position: Position | None = None
+    _samples: int = 0
+
+    def add(self, sample: Position | FlowSample | ChemSample | DetectionSample) -> None:
+        self._samples += 1
+        if isinstance(sample, Position):
+            # LOCAL_POSITION_NED is preferred: a global fix only stands in while it is stale
+            last = self._position
+            fresh_local = (
+                last is not None and last.local and sample.time_s - last.time_s <= self.max_position_age_s
+            )
+            if sample.local or not fresh_local:
+                self._position = sample
+        elif isinstance(sample, FlowSample):
+            self._flows.append(sample)
+        elif isinstance(sample, ChemSample):
+            self._chem_max = sample.value if self._chem_max is None else max(self._chem_max, sample.value)
+        else:
+            self._detected = bool(self._detected) or sample.detected
+
+    def close(self, time_s: float) -> Tick:
+        gaps = []
+        position = self._position
+        if position is None or time_s - position.time_s > self.max_position_age_s:
+            gaps.append("position")
+        if not self._flows:
+            gaps.append("flow")
+        if self._chem_max is None and self._detected is None:
+            gaps.append("chemical")
+        observation = None
+        if position is not None and not gaps:
+            # eq. 1-2: the mean flow over the M samples of the tick
+            flow_x = sum(f.flow_x for f in self._flows) / len(self._flows)
+            flow_y = sum(f.flow_y for f in self._flows) / len(self._flows)
+            detected = bool(self._detected) or (
+                self._chem_max is not None and self._chem_max >= self.threshold
+            )
+            observation = Observation(time_s, position.x, position.y, flow_x, flow_y, detected)
+        tick = Tick(time_s, observation, tuple(gaps), self._samples)
+        self._flows = []
+        self._chem_max = None
+        self._detected = None
+        self._samples = 0
+        # the position persists (up to max_position_age_s): a slow position stream is not a gap
+        return tick

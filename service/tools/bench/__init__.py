@@ -1,0 +1,1 @@
+"""Benchmarks runnable by anyone: ``oslim bench mapping|plume|search|suite``."""

@@ -1,0 +1,161 @@
+"""``oslim bench``: rerunnable benchmarks that print what they measured."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+
+from service.tools.bench import mapping, search, suite
+from service.tools.progress import progress_bar
+from sim_bridge.scenarios import load_scenario
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.bench == "mapping":
+        return _run_mapping(args)
+    if args.bench == "search":
+        return _run_search(args)
+    if args.bench == "suite":
+        return _run_suite(args)
+    if args.bench == "plume":
+        return _run_plume(args)
+    raise AssertionError(args.bench)
+
+
+def _run_mapping(args: argparse.Namespace) -> int:
+    if not args.json:
+        print(
+            f"{'mapper':<8}{'cells':>9}{'window':>8}{'median ms':>11}{'p95 ms':>9}{'peak MB':>9}", flush=True
+        )
+    for result in mapping.run(args.mappers, args.cells, args.window, args.ticks):
+        if args.json:
+            print(json.dumps(mapping.as_row(result)), flush=True)
+        else:
+            print(
+                f"{result.mapper:<8}{result.cells:>9}{result.window:>8}"
+                f"{result.median_ms:>11.2f}{result.p95_ms:>9.2f}{result.peak_mb:>9.1f}",
+                flush=True,
+            )
+    bandwidth = mapping.memory_bandwidth_gb_per_s()
+    if args.json:
+        print(json.dumps({"limit": "memory_bandwidth", "gb_per_s": bandwidth}))
+    else:
+        print(f"memory bandwidth (numpy copy, read + write): {bandwidth:.2f} GB/s")
+    return 0
+
+
+def _fmt(value: float | None, spec: str) -> str:
+    return "never" if value is None else format(value, spec)
+
+
+def _run_search(args: argparse.Namespace) -> int:
+    if args.oracle_declaration and args.report:
+        raise SystemExit("oslim bench search: --oracle-declaration gives a bound, not a result: no --report")
+    scenario = load_scenario(args.scenario, args.overrides)
+    mappers = search.expand(args.mappers, search.mapper_names(), str(scenario.config.mapping.method))
+    planners = search.expand(args.planners, search.planner_names(), str(scenario.config.planning.method))
+    if not args.json:
+        oracle = "; ORACLE declaration (a perfect guard: a bound, not a result)"
+        print(
+            f"{scenario.name}: {args.runs} runs per configuration (seeds {args.first_seed}.."
+            f"{args.first_seed + args.runs - 1}), limit {args.max_time:g} s; "
+            "times: failed runs count as never" + (oracle if args.oracle_declaration else ""),
+            flush=True,
+        )
+        print(
+            f"{'mapper':<7}{'planner':<12}{'runs':>5}{'success':>9}{'median s':>10}{'p90 s':>8}"
+            f"{'path m':>8}{'wrong':>7}{'none':>6}",
+            flush=True,
+        )
+    summaries = []
+    results: dict[tuple[str, str], list[search.MissionResult]] = {}
+    with progress_bar(args.runs * len(mappers) * len(planners), quiet=args.json) as progress:
+        configurations = list(search.run_configurations(
+            args.scenario, mappers, planners, args.runs, jobs=args.jobs, max_time_s=args.max_time,
+            overrides=args.overrides, first_seed=args.first_seed, oracle=args.oracle_declaration,
+            progress=progress,
+        ))  # fmt: skip
+    for summary, batch in configurations:
+        summaries.append(summary)
+        results[summary.mapper, summary.planner] = batch
+        if args.json:
+            row = summary.as_row()
+            if args.oracle_declaration:
+                row["oracle_declaration"] = True
+            print(json.dumps(row), flush=True)
+        else:
+            print(
+                f"{summary.mapper:<7}{summary.planner:<12}{summary.runs:>5}{summary.success_rate:>9.1%}"
+                f"{_fmt(summary.median_time_s, '.0f'):>10}{_fmt(summary.p90_time_s, '.0f'):>8}"
+                f"{summary.median_path_m:>8.0f}{summary.wrong_declarations:>7}{summary.undeclared:>6}",
+                flush=True,
+            )
+            if summary.success_rate < 1.0:
+                print(f"  {summary.failure_line()}", flush=True)
+    if args.report:
+        from service.tools.bench import report  # matplotlib is optional: only the report needs it
+
+        best = max(summaries, key=report.rank)
+        written = report.write_report(
+            args.report,
+            args.scenario,
+            summaries,
+            best,
+            results=results[best.mapper, best.planner],
+            overrides=args.overrides,
+            max_time_s=args.max_time,
+            first_seed=args.first_seed,
+        )
+        if not args.json:
+            print(f"report: {written}", flush=True)
+    return 0
+
+
+def _run_plume(args: argparse.Namespace) -> int:
+    from sim_bridge.plume_bench import measure_plume
+
+    result = measure_plume(puffs=args.puffs)
+    row = dataclasses.asdict(result)
+    if args.json:
+        print(json.dumps(row))
+    else:
+        print(
+            f"plume: {result.live_puffs} live puffs, dt {result.dt_s:g} s: "
+            f"{result.median_step_ms:.2f} ms per step, "
+            f"{result.steps_per_s:.0f} steps/s, real-time factor {result.real_time_factor:.1f} "
+            f"(slowest repeat {result.worst_real_time_factor:.1f})"
+        )
+    return 0
+
+
+def _run_suite(args: argparse.Namespace) -> int:
+    files = suite.suite_classes(args.suite)
+    if args.classes:
+        known = {path.stem: path for path in files}
+        unknown = [name for name in args.classes if name not in known]
+        if unknown:
+            raise SystemExit(f"oslim bench suite: unknown class {unknown[0]!r}; known: {', '.join(known)}")
+        files = [known[name] for name in dict.fromkeys(args.classes)]
+    suite.service_config(args.config, tuple(args.overrides))  # a broken configuration stops here
+    if not args.json:
+        print(
+            f"suite {args.suite or 'config/suites'}: {len(files)} classes x {args.runs} missions (seeds "
+            f"{args.first_seed}..{args.first_seed + args.runs - 1}), configuration "
+            f"{args.config or 'config/default.toml'}{''.join(f' --set {o}' for o in args.overrides)}; "
+            "times: median / p90 to a correct declaration",
+            flush=True,
+        )
+        print(suite.HEADER, flush=True)
+    with progress_bar(args.runs * len(files), quiet=args.json) as progress:
+        for row in suite.timed(
+            suite.run_suite(
+                files, args.runs, first_seed=args.first_seed, config_path=args.config,
+                overrides=args.overrides, jobs=args.jobs, scheduler=args.scheduler, progress=progress,
+            )
+        ):  # fmt: skip
+            if args.json:
+                print(json.dumps(row.as_row()), flush=True)
+            else:
+                print(row.line(), flush=True)
+    return 0

@@ -1,0 +1,267 @@
+"""The world suite: every class of worlds under ``config/suites/`` with one service configuration.
+
+Each class draws its worlds from the seed (``sim_bridge.generator``); every mission is the same
+in-process closed loop as ``oslim bench search`` (``search.run_mission``), with the class's time
+limit scaled to the drawn area and vehicle speed. The service configuration is the one a user
+deploys (``config/default.toml`` unless another file is given) with the class's area; ``--set``
+overrides apply to every class. What counts is the worst class and the wrong declarations.
+
+Missions run in a local process pool, or on a Dask cluster (``scheduler``: its address); both
+give the same results for the same seeds, because a mission depends only on its spec.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from service.core.config import Config, load_config
+from service.tools.bench.search import FailureClass, MissionResult, run_mission
+from sim_bridge.generator import SUITE_DIR, WorldClass, available_classes, draw_scenario, load_class
+
+CLASS_KEYS = (
+    "class",
+    "runs",
+    "success_rate",
+    "wrong_declarations",
+    "median_time_s",
+    "p90_time_s",
+    "max_time_s",
+)
+SUMMARY_KEYS = ("classes", "missions", "worst_class", "worst_success_rate", "wrong_rate", "missions_per_s")
+
+
+HEADER = (
+    f"{'class':<16}{'runs':>5}{'success':>9}{'wrong':>7}{'median s':>10}{'p90 s':>8}"
+    f"{'limit s':>9}{'path m':>8}"
+    "  failures: never smelled / not reached / undeclared / wrong"
+)
+
+
+def _fmt(value: float | None) -> str:
+    return "-" if value is None else f"{value:.0f}"
+
+
+@dataclass(frozen=True)
+class SuiteMission:
+    """One mission of the suite (picklable: what a worker needs to rebuild it)."""
+
+    class_path: str
+    seed: int
+    config_path: str | None = None
+    overrides: tuple[str, ...] = ()
+
+
+@lru_cache(maxsize=64)
+def _world_class(path: str) -> WorldClass:
+    return load_class(path)
+
+
+@lru_cache(maxsize=8)
+def service_config(path: str | None, overrides: tuple[str, ...]) -> Config:
+    """The service configuration every class runs with (read once per process)."""
+    return load_config(path, overrides)
+
+
+def run_suite_mission(spec: SuiteMission) -> tuple[MissionResult, float]:
+    """The mission and its time limit (a worker's task)."""
+    config = service_config(spec.config_path, spec.overrides)
+    drawn = draw_scenario(_world_class(spec.class_path), spec.seed, config)
+    return run_mission(drawn.scenario, spec.seed, max_time_s=drawn.time_limit_s), drawn.time_limit_s
+
+
+@dataclass(frozen=True)
+class ClassSummary:
+    """One class's figures over its missions."""
+
+    name: str
+    runs: int
+    success_rate: float
+    wrong_declarations: int
+    median_time_s: float | None
+    """Median time to a correct declaration, over the missions that made one."""
+    p90_time_s: float | None
+    max_time_s: float
+    """The longest time limit among the class's worlds (it scales with area and speed)."""
+    median_path_m: float
+    failures: dict[FailureClass, int] = field(default_factory=dict)
+
+    def line(self) -> str:
+        """The class's row of the text table (columns of ``HEADER``)."""
+        f = self.failures
+        counts = " / ".join(str(f.get(kind, 0)) for kind in FailureClass)
+        return (
+            f"{self.name:<16}{self.runs:>5}{self.success_rate:>9.1%}{self.wrong_declarations:>7}"
+            f"{_fmt(self.median_time_s):>10}{_fmt(self.p90_time_s):>8}{self.max_time_s:>9.0f}"
+            f"{self.median_path_m:>8.0f}  {counts}"
+        )
+
+    def as_row(self) -> dict[str, Any]:
+        """The JSON object of ``oslim bench suite --json`` for this class."""
+        return {
+            "class": self.name,
+            "runs": self.runs,
+            "success_rate": self.success_rate,
+            "wrong_declarations": self.wrong_declarations,
+            "median_time_s": self.median_time_s,
+            "p90_time_s": self.p90_time_s,
+            "max_time_s": self.max_time_s,
+            "median_path_m": self.median_path_m,
+            "failures": {str(kind): self.failures.get(kind, 0) for kind in FailureClass},
+        }
+
+
+def summarise_class(name: str, outcomes: Sequence[tuple[MissionResult, float]]) -> ClassSummary:
+    if not outcomes:
+        raise ValueError("no missions to summarise")
+    results = [r for r, _ in outcomes]
+    times = [r.time_s for r in results if r.correct]
+    failures = [r.failure for r in results]
+    return ClassSummary(
+        name=name,
+        runs=len(results),
+        success_rate=len(times) / len(results),
+        wrong_declarations=sum(r.wrong for r in results),
+        median_time_s=float(np.median(times)) if times else None,
+        p90_time_s=float(np.quantile(times, 0.9, method="inverted_cdf")) if times else None,
+        max_time_s=max(limit for _, limit in outcomes),
+        median_path_m=float(np.median([r.path_m for r in results])),
+        failures={kind: failures.count(kind) for kind in FailureClass},
+    )
+
+
+@dataclass(frozen=True)
+class SuiteSummary:
+    classes: int
+    missions: int
+    worst_class: str
+    worst_success_rate: float
+    wrong_rate: float
+    """Wrong declarations per mission, over the whole suite."""
+    missions_per_s: float
+    elapsed_s: float
+
+    def line(self) -> str:
+        return (
+            f"summary: worst class {self.worst_class} {self.worst_success_rate:.1%}; wrong declarations "
+            f"{self.wrong_rate:.2%} of {self.missions} missions; {self.missions_per_s:.2f} missions/s "
+            f"({self.elapsed_s:.0f} s)"
+        )
+
+    def as_row(self) -> dict[str, Any]:
+        """The last JSON object of ``oslim bench suite --json`` (``"summary": true``)."""
+        row: dict[str, Any] = {"summary": True}
+        row.update({key: getattr(self, key) for key in SUMMARY_KEYS})
+        row["elapsed_s"] = self.elapsed_s
+        return row
+
+
+def summarise_suite(classes: Sequence[ClassSummary], elapsed_s: float) -> SuiteSummary:
+    worst = min(classes, key=lambda c: c.success_rate)
+    missions = sum(c.runs for c in classes)
+    return SuiteSummary(
+        classes=len(classes),
+        missions=missions,
+        worst_class=worst.name,
+        worst_success_rate=worst.success_rate,
+        wrong_rate=sum(c.wrong_declarations for c in classes) / missions,
+        missions_per_s=missions / elapsed_s if elapsed_s > 0 else math.inf,
+        elapsed_s=elapsed_s,
+    )
+
+
+Progress = Callable[[int], None]
+"""Told how many more missions are done."""
+
+
+def _local(specs: list[SuiteMission], jobs: int, progress: Progress) -> Iterator[tuple[MissionResult, float]]:
+    if jobs == 1:
+        for spec in specs:
+            outcome = run_suite_mission(spec)
+            progress(1)
+            yield outcome
+        return
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        futures: list[Future[tuple[MissionResult, float]]] = []
+        for spec in specs:
+            future = pool.submit(run_suite_mission, spec)
+            future.add_done_callback(lambda _: progress(1))
+            futures.append(future)
+        for future in futures:
+            yield future.result()
+
+
+def _dask(
+    specs: list[SuiteMission], scheduler: Any, progress: Progress
+) -> Iterator[tuple[MissionResult, float]]:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:  # the optional extra
+        raise SystemExit("oslim bench suite --scheduler needs Dask: pip install -e '.[cluster]'") from None
+    client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
+    try:
+        futures = client.map(run_suite_mission, specs, pure=False)
+        for _ in as_completed(futures):
+            progress(1)
+        yield from client.gather(futures)
+    finally:
+        if client is not scheduler:
+            client.close()
+
+
+def run_suite(
+    class_files: Sequence[Path],
+    runs: int,
+    *,
+    first_seed: int = 0,
+    config_path: str | None = None,
+    overrides: Sequence[str] = (),
+    jobs: int | None = None,
+    scheduler: Any = None,
+    progress: Progress = lambda _: None,
+) -> Iterator[ClassSummary]:
+    """Every class over seeds first_seed..first_seed+runs-1; yields each class's summary in order.
+
+    ``scheduler``: a Dask scheduler address (or a ``distributed.Client``) to run the missions on;
+    None runs them in ``jobs`` local processes (default: the cores)."""
+    if runs < 1:
+        raise ValueError("runs must be >= 1")
+    service_config(config_path, tuple(overrides))  # a broken configuration fails here, once
+    classes = [_world_class(str(path)) for path in class_files]
+    specs = [
+        SuiteMission(c.origin, seed, config_path, tuple(overrides))
+        for c in classes
+        for seed in range(first_seed, first_seed + runs)
+    ]
+    for c in classes:  # every class can draw its first world with this configuration
+        draw_scenario(c, first_seed, service_config(config_path, tuple(overrides)))
+    if scheduler is not None:
+        outcomes = _dask(specs, scheduler, progress)
+    else:
+        outcomes = _local(specs, jobs or os.cpu_count() or 1, progress)
+    for c in classes:
+        yield summarise_class(c.name, [next(outcomes) for _ in range(runs)])
+
+
+def suite_classes(directory: str | Path | None = None) -> list[Path]:
+    """The class files of ``directory`` (default: config/suites)."""
+    return available_classes(Path(directory) if directory is not None else SUITE_DIR)
+
+
+def timed(summaries: Iterator[ClassSummary]) -> Iterator[ClassSummary | SuiteSummary]:
+    """The class summaries as they come, then the suite's summary (timed from the first request)."""
+    start = time.perf_counter()
+    done = []
+    for summary in summaries:
+        done.append(summary)
+        yield summary
+    yield summarise_suite(done, time.perf_counter() - start)

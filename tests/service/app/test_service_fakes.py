@@ -1,0 +1,250 @@
+"""The service against in-memory fakes of its edges: no sockets, no pymavlink, no Zenoh, no file."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator, Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from service.api import Search
+from service.app.edges import Edges
+from service.app.service import STREAMS, Clock, Service
+from service.core.config import Config
+from service.core.errors import LinkError
+from service.core.observation import Observation
+from service.edges.foxglove_scene import VEHICLE_TOPIC
+from service.edges.mavlink_link import LinkCounters
+from service.edges.signing import SigningCounters
+
+SPEED = 40.0  # service seconds per wall second: a 1 s tick every 25 ms
+ARMED = 128  # MAV_MODE_FLAG_SAFETY_ARMED
+
+
+class FakeMessage:
+    """Duck-types a pymavlink message: ``get_type``, the source ids and the fields."""
+
+    def __init__(self, kind: str, **fields: Any) -> None:
+        self._kind = kind
+        self.__dict__.update(fields)
+
+    def get_type(self) -> str:
+        return self._kind
+
+    def get_srcSystem(self) -> int:  # noqa: N802 - pymavlink's name
+        return 1
+
+    def get_srcComponent(self) -> int:  # noqa: N802 - pymavlink's name
+        return 1
+
+
+@dataclass
+class FakeLink:
+    """MAVLink in from a queue; everything sent is kept as (what, arguments)."""
+
+    counters: LinkCounters = field(default_factory=LinkCounters)
+    signing: SigningCounters | None = None
+    inbox: asyncio.Queue[tuple[float, Any] | None] = field(default_factory=asyncio.Queue)
+    sent: list[tuple[str, tuple[Any, ...]]] = field(default_factory=list)
+    fail_with: Exception | None = None
+
+    async def __aiter__(self) -> AsyncIterator[tuple[float, Any]]:
+        while (item := await self.inbox.get()) is not None:
+            yield item
+        if self.fail_with is not None:
+            raise self.fail_with
+
+    def adopt_system(self, system: int) -> None:
+        self.sent.append(("adopt", (system,)))
+
+    def send_heartbeat(self) -> None:
+        self.sent.append(("heartbeat", ()))
+
+    def request_interval(self, target_system: int, message_id: int, rate_hz: float) -> None:
+        self.sent.append(("interval", (target_system, message_id, rate_hz)))
+
+    def send_setpoint(
+        self, target_system: int, time_ms: int, x_m: float, y_m: float, altitude_m: float, type_mask: int
+    ) -> None:
+        self.sent.append(("setpoint", (target_system, time_ms, x_m, y_m, altitude_m, type_mask)))
+
+    def send_statustext(self, text: str, severity: int = 6) -> None:
+        self.sent.append(("statustext", (text,)))
+
+    def of(self, what: str) -> list[tuple[Any, ...]]:
+        return [args for kind, args in self.sent if kind == what]
+
+
+@dataclass
+class FakeMaps:
+    """What would go out over Zenoh."""
+
+    slim: list[np.ndarray[Any, Any]] = field(default_factory=list)
+    estimates: list[tuple[float, str, Any]] = field(default_factory=list)
+    observations: list[Observation] = field(default_factory=list)
+    paths: list[Sequence[tuple[float, float]]] = field(default_factory=list)
+
+    def publish_obs(self, obs: Observation) -> None:
+        self.observations.append(obs)
+
+    def publish_maps(self, time_s: float, slim: Any, plume: Any) -> None:
+        self.slim.append(np.array(slim))
+
+    def publish_estimate(self, time_s: float, state: str, estimate: Any) -> None:
+        self.estimates.append((time_s, state, estimate))
+
+    def publish_path(self, time_s: float, waypoints: Sequence[tuple[float, float]]) -> None:
+        self.paths.append(waypoints)
+
+
+@dataclass
+class FakeRecorder:
+    """What would go into the MCAP file."""
+
+    path: Path | None = None
+    ticks: list[Observation] = field(default_factory=list)
+    events: list[str] = field(default_factory=list)
+    setpoints: list[tuple[float, float, float, float]] = field(default_factory=list)
+    scene: list[str] = field(default_factory=list)
+    """The topics of the drawable (Foxglove) messages."""
+
+    def tick(self, obs: Observation, slim: Any, plume: Any, **_: Any) -> bool:
+        self.ticks.append(obs)
+        return True
+
+    def write_setpoint(self, time_s: float, x: float, y: float, z: float) -> bool:
+        self.setpoints.append((time_s, x, y, z))
+        return True
+
+    def write_event(self, time_s: float, name: str, text: str = "", **detail: Any) -> bool:
+        self.events.append(name)
+        return True
+
+    def write_messages(self, records: Sequence[tuple[str, bytes]]) -> bool:
+        self.scene.extend(topic for topic, _ in records)
+        return True
+
+
+async def until(condition: Callable[[], bool], timeout_s: float = 10.0) -> None:
+    async with asyncio.timeout(timeout_s):
+        while not condition():
+            await asyncio.sleep(0.005)
+
+
+async def vehicle(service: Service, link: FakeLink, *, armed: bool = True) -> None:
+    """A vehicle in GUIDED driving east through odour: heartbeat at 1 Hz, the rest at 5 Hz."""
+    clock, k = service.clock, 0
+    while True:
+        t = clock.now()
+        if k % 5 == 0:
+            link.inbox.put_nowait((t, FakeMessage(
+                "HEARTBEAT", type=10, autopilot=3, base_mode=ARMED if armed else 0,
+                custom_mode=service.config.mavlink.guided_mode,
+            )))  # fmt: skip
+        # LOCAL_POSITION_NED is north, east: map x = 10 + 0.5 t east, y = 0
+        link.inbox.put_nowait((t, FakeMessage("LOCAL_POSITION_NED", x=0.0, y=10.0 + 0.5 * t)))
+        link.inbox.put_nowait((t, FakeMessage("WIND_COV", wind_x=0.0, wind_y=-0.5)))  # toward the west
+        link.inbox.put_nowait(
+            (t, FakeMessage("NAMED_VALUE_FLOAT", name=b"CHEM", value=2.0 if k % 2 else 0.0))
+        )
+        k += 1
+        await clock.sleep_until(t + 0.2)
+
+
+def fakes() -> tuple[FakeLink, FakeMaps, FakeRecorder, Edges]:
+    link, maps, recorder = FakeLink(), FakeMaps(), FakeRecorder()
+    return link, maps, recorder, Edges(link, maps, recorder)
+
+
+def test_the_service_maps_publishes_records_and_commands_over_fake_edges() -> None:
+    link, maps, recorder, edges = fakes()
+
+    async def body() -> None:
+        service = Service(Config(), clock=Clock(SPEED))
+        stop = asyncio.Event()
+        run = asyncio.create_task(service.run_with(edges, stop))
+        driver = asyncio.create_task(vehicle(service, link))
+        await until(lambda: service.stats.observations >= 6 and len(recorder.setpoints) >= 3)
+        stop.set()
+        stats = await run
+        driver.cancel()
+        assert stats is service.stats
+        assert service.target is None  # stopped commanding
+
+    asyncio.run(body())
+    assert link.of("heartbeat")
+    assert {args[1] for args in link.of("interval")} == set(STREAMS.values())
+    assert all(args[0] == 1 for args in link.of("interval"))  # to the autopilot heard
+    # every observation is published and recorded once, with its maps
+    assert recorder.ticks == maps.observations
+    assert len(maps.slim) == len(maps.estimates) == len(recorder.ticks) >= 6
+    # the maps are what the search computes from the same observations: nothing else feeds them
+    replayed = Search(Config())
+    for obs, slim in zip(recorder.ticks, maps.slim, strict=True):
+        replayed.update_map(obs)
+        np.testing.assert_array_equal(slim, replayed.likelihood)
+    # every tick also records what Foxglove draws: the vehicle among it, once per tick
+    assert recorder.scene.count(VEHICLE_TOPIC) == len(recorder.ticks)
+    first = recorder.ticks[0]
+    assert first.flow_x == pytest.approx(-0.5)
+    assert first.flow_y == pytest.approx(0.0)
+    # setpoints sent are the recorded ones, in the area, and at the configured altitude
+    setpoints = link.of("setpoint")
+    assert len(setpoints) == len(recorder.setpoints)
+    for (_, _, x, y, z, mask), (_, rx, ry, rz) in zip(setpoints, recorder.setpoints, strict=True):
+        assert (x, y, z) == (rx, ry, rz) == (x, y, Config().mavlink.altitude_m)
+        assert 0.0 <= x <= 100.0
+        assert -50.0 <= y <= 50.0
+        assert mask == Config().mavlink.setpoint_type_mask
+
+
+def test_a_disarmed_vehicle_is_mapped_but_not_commanded() -> None:
+    link, _, recorder, edges = fakes()
+
+    async def body() -> None:
+        service = Service(Config(), clock=Clock(SPEED))
+        stop = asyncio.Event()
+        run = asyncio.create_task(service.run_with(edges, stop))
+        driver = asyncio.create_task(vehicle(service, link, armed=False))
+        await until(lambda: service.stats.observations >= 4)
+        stop.set()
+        await run
+        driver.cancel()
+
+    asyncio.run(body())
+    assert len(recorder.ticks) >= 4
+    assert link.of("setpoint") == []
+    assert recorder.setpoints == []
+
+
+def test_a_failing_edge_stops_the_run_with_its_own_error() -> None:
+    link, _, recorder, edges = fakes()
+    link.fail_with = LinkError("serial device gone")
+
+    async def body() -> None:
+        service = Service(Config(), clock=Clock(SPEED))
+        run = asyncio.create_task(service.run_with(edges, asyncio.Event()))
+        await until(lambda: service.stats.ticks >= 2)
+        link.inbox.put_nowait(None)  # the link's stream ends with the error
+        with pytest.raises(LinkError, match="serial device gone"):
+            await run
+        assert run.done()
+
+    asyncio.run(body())
+    assert recorder.events.count("gap") >= 2  # ticks without telemetry were recorded as gaps
+
+
+def test_a_link_that_closes_ends_the_run() -> None:
+    link, _, _, edges = fakes()
+
+    async def body() -> None:
+        service = Service(Config(), clock=Clock(SPEED))
+        link.inbox.put_nowait(None)
+        stats = await asyncio.wait_for(service.run_with(edges, asyncio.Event()), 5.0)
+        assert stats.observations == 0
+
+    asyncio.run(body())

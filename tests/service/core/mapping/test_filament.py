@@ -1,0 +1,158 @@
+import itertools
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import norm
+
+from service.core.grid import Grid
+from service.core.mapping.filament import filament_factors, flow_spread, history_factors, release_offsets
+from service.core.mapping.mapper import FlowStep
+from service.core.mapping.transport import transition
+
+SMALL = Grid(0.0, 10.0, 0.0, 8.0, columns=5, rows=4)
+
+
+def reference_factor(edges: np.ndarray, vehicle: float, drift: float, spread: float) -> np.ndarray:
+    """Gaussian mass of the source position N(vehicle - drift, spread^2) over each [edge, next edge]."""
+    dist = norm(loc=vehicle - drift, scale=spread)
+    return np.array([dist.cdf(hi) - dist.cdf(lo) for lo, hi in itertools.pairwise(edges)])
+
+
+def test_factors_match_normal_cdf_per_cell() -> None:
+    lag = np.array([0.5, 1.7, 4.0, 9.0])
+    drift_x = np.array([0.3, 2.1, 3.9, 7.5])
+    drift_y = np.array([-0.4, 0.0, 1.3, -2.2])
+    sx, sy = 0.8, 1.3
+    x_v, y_v = 7.0, 3.0
+    px, py = filament_factors(SMALL, x_v, y_v, lag, drift_x, drift_y, sx, sy)
+    assert px.shape == (4, 5)
+    assert py.shape == (4, 4)
+    x_edges = np.array([0.0, 2.0, 4.0, 6.0, 8.0, 10.0])
+    y_edges = np.array([0.0, 2.0, 4.0, 6.0, 8.0])
+    for release in range(4):
+        spread = math.sqrt(lag[release])
+        expect_x = reference_factor(x_edges, x_v, drift_x[release], sx * spread)
+        expect_y = reference_factor(y_edges, y_v, drift_y[release], sy * spread)
+        np.testing.assert_allclose(px[release], expect_x, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(py[release], expect_y, rtol=0, atol=1e-14)
+
+
+def test_far_tails_keep_relative_precision() -> None:
+    # cells 15 to 25 spreads away on both sides: Phi(b) - Phi(a) would cancel to 0 upflow
+    g = Grid(-20.0, 20.0, -1.0, 1.0, columns=40, rows=1)
+    px, _ = filament_factors(g, 0.5, 0.0, np.array([1.0]), np.array([0.0]), np.array([0.0]), 1.0, 1.0)
+    mean = 0.5
+    for col in (35, 39):  # x in [15, 16] and [19, 20], above the mean
+        lo, hi = -20.0 + col, -19.0 + col
+        expect = norm.sf(lo - mean) - norm.sf(hi - mean)
+        assert px[0, col] == pytest.approx(expect, rel=1e-10)
+        assert px[0, col] > 0.0
+    for col in (0, 4):  # x in [-20, -19] and [-16, -15], below the mean
+        lo, hi = -20.0 + col, -19.0 + col
+        expect = norm.cdf(hi - mean) - norm.cdf(lo - mean)
+        assert px[0, col] == pytest.approx(expect, rel=1e-10)
+
+
+def test_equals_paper_eq1_when_cells_are_small() -> None:
+    # pomdp-astar eq. 1 (density at the centres times L_x L_y) is the midpoint rule of our mass
+    g = Grid(0.0, 20.0, 0.0, 10.0, columns=80, rows=40)
+    lag, sx, sy = 30.0, 0.9, 0.6
+    drift = (4.0, 1.5)
+    x_v, y_v = 15.125, 5.125
+    px, py = filament_factors(
+        g, x_v, y_v, np.array([lag]), np.array([drift[0]]), np.array([drift[1]]), sx, sy
+    )
+    xc = (np.arange(80) + 0.5) * 0.25
+    yc = (np.arange(40) + 0.5) * 0.25
+    dx = x_v - xc[None, :] - drift[0]
+    dy = y_v - yc[:, None] - drift[1]
+    eq1 = (
+        0.25 * 0.25 / (2 * math.pi * lag * sx * sy)
+        * np.exp(-(dx**2) / (2 * lag * sx**2))
+        * np.exp(-(dy**2) / (2 * lag * sy**2))
+    )  # fmt: skip
+    ours = np.outer(py[0], px[0])
+    near = eq1 > 1e-3 * eq1.max()
+    np.testing.assert_allclose(ours[near], eq1[near], rtol=2e-3)
+
+
+def test_stays_a_probability_where_eq1_exceeds_one() -> None:
+    # 10 m cells, lag 1 s, sigma 1: eq. 1 at delta = 0 gives 100 / (2 pi) ~ 16
+    g = Grid(0.0, 50.0, 0.0, 50.0, columns=5, rows=5)
+    px, py = filament_factors(g, 25.0, 25.0, np.array([1.0]), np.array([0.0]), np.array([0.0]), 1.0, 1.0)
+    p = np.outer(py[0], px[0])
+    assert p.max() <= 1.0
+    assert p[2, 2] == pytest.approx((norm.cdf(5.0) - norm.cdf(-5.0)) ** 2, rel=1e-12)
+
+
+def test_mass_is_conserved_inside_the_area_and_lost_outside() -> None:
+    g = Grid(0.0, 100.0, 0.0, 100.0, columns=50, rows=50)
+    # source means at least 9 spreads inside the area
+    lag = np.array([1.0, 10.0, 25.0])
+    px, py = filament_factors(g, 50.0, 50.0, lag, np.array([0.0, 20.0, 5.0]), np.zeros(3), 1.0, 1.0)
+    np.testing.assert_allclose(px.sum(axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(py.sum(axis=1), 1.0, atol=1e-12)
+    # drift that puts the source mean outside the western edge: about half the mass is gone
+    px, _ = filament_factors(g, 50.0, 50.0, np.array([4.0]), np.array([50.0]), np.zeros(1), 1.0, 1.0)
+    assert px.sum() == pytest.approx(0.5, abs=1e-12)
+
+
+def test_zero_spread_is_a_point_mass() -> None:
+    lag = np.array([1.0, 2.0])
+    px, py = filament_factors(SMALL, 7.0, 3.0, lag, np.array([2.0, 3.0]), np.array([0.5, 1.0]), 0.0, 0.0)
+    # source at x = 5 (column 2), then at x = 4 (the edge between columns 1 and 2)
+    np.testing.assert_array_equal(px, [[0, 0, 1, 0, 0], [0, 0.5, 0.5, 0, 0]])
+    # source at y = 2.5 (row 1), then at y = 2 (the edge between rows 0 and 1)
+    np.testing.assert_array_equal(py, [[0, 1, 0, 0], [0.5, 0.5, 0, 0]])
+
+
+def test_release_offsets_accumulate_newest_first() -> None:
+    def step(dx: float, dy: float, dt: float) -> FlowStep:
+        return FlowStep(transition(SMALL, dx / dt, dy / dt, dt), dx, dy, dt)
+
+    history = [step(1.0, 0.5, 1.0), step(2.0, -1.0, 0.5), step(0.25, 0.0, 2.0)]  # oldest first
+    lag, sx, sy = release_offsets(history)
+    np.testing.assert_allclose(lag, [2.0, 2.5, 3.5])
+    np.testing.assert_allclose(sx, [0.25, 2.25, 3.25])
+    np.testing.assert_allclose(sy, [0.0, -1.0, -0.5])
+    px, py = history_factors(SMALL, SMALL.cell_of(7.0, 3.0), history, 0.5, 0.5)
+    expect_x = reference_factor(np.arange(6) * 2.0, 7.0, 2.25, 0.5 * math.sqrt(2.5))
+    np.testing.assert_allclose(px[1], expect_x, atol=1e-14)
+    assert py.shape == (3, 4)
+
+
+def test_empty_history_has_no_release_times() -> None:
+    px, py = history_factors(SMALL, 0, [], 1.0, 1.0)
+    assert px.shape == (0, 5)
+    assert py.shape == (0, 4)
+
+
+def test_flow_spread_is_the_time_weighted_std_of_each_component() -> None:
+    def step(ux: float, uy: float, dt: float) -> FlowStep:
+        return FlowStep(transition(SMALL, ux, uy, dt), ux * dt, uy * dt, dt)
+
+    # u_x: 1 for 1 s, 2 for 3 s -> mean 1.75, variance (0.75^2 * 1 + 0.25^2 * 3) / 4 = 0.1875
+    history = [step(1.0, 0.0, 1.0), step(2.0, 0.0, 3.0)]
+    sx, sy = flow_spread(history)
+    assert sx == pytest.approx(math.sqrt(0.1875))
+    assert sy == 0.0
+    assert flow_spread(history[:1]) == (0.0, 0.0)
+
+
+def test_drift_spread_widens_by_eq_d1() -> None:
+    def step(ux: float, uy: float) -> FlowStep:
+        return FlowStep(transition(SMALL, ux, uy, 1.0), ux, uy, 1.0)
+
+    history = [step(1.0, 0.5), step(1.0, -0.5), step(1.0, 0.5)]  # std of u_y: sqrt(2/9) m/s
+    k, sigma = 2.0, 0.5
+    px, py = history_factors(SMALL, SMALL.cell_of(7.0, 3.0), history, sigma, sigma, drift_spread=k)
+    px0, _ = history_factors(SMALL, SMALL.cell_of(7.0, 3.0), history, sigma, sigma)
+    np.testing.assert_array_equal(px, px0)  # u_x never varied: no extra spread along x
+    s_y = math.sqrt(2.0 / 9.0)
+    y_edges = np.arange(5) * 2.0
+    for lag, drift_y in [(1.0, 0.5), (2.0, 0.0), (3.0, 0.5)]:
+        spread = math.sqrt(sigma**2 * lag + (k * s_y * lag) ** 2)  # eq. D1
+        np.testing.assert_allclose(
+            py[int(lag) - 1], reference_factor(y_edges, 3.0, drift_y, spread), atol=1e-14
+        )

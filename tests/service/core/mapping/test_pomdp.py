@@ -1,0 +1,183 @@
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from service.core.grid import Grid
+from service.core.mapping import MAPPERS, make_mapper
+from service.core.mapping.bayes import BayesMapper
+from service.core.mapping.filament import filament_factors
+from service.core.mapping.mapper import MapperParams
+from service.core.mapping.pomdp import WHOLE_DIRECT_SIZE, PomdpMapper, log_non_detection, series_terms
+from service.core.observation import Observation
+
+SMALL = Grid(0.0, 12.0, 0.0, 8.0, columns=6, rows=4)
+FIELD = Grid(0.0, 100.0, -50.0, 50.0, columns=50, rows=50)
+
+
+def phi(z: float) -> float:
+    return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
+
+
+def cell_mass(lo: float, hi: float, mean: float, spread: float) -> float:
+    return phi((hi - mean) / spread) - phi((lo - mean) / spread)
+
+
+def non_detection(grid: Grid, obs: list[Observation], params: MapperParams) -> np.ndarray:
+    """gamma_ij of eq. 2 cell by cell, as a product over release times, from the raw observations."""
+    last = obs[-1]
+    col = int((last.x - grid.x_min) // grid.cell_width_m)
+    row = int((last.y - grid.y_min) // grid.cell_height_m)
+    xv = grid.x_min + (col + 0.5) * grid.cell_width_m
+    yv = grid.y_min + (row + 0.5) * grid.cell_height_m
+    steps = [(b.time_s - a.time_s, b.flow_x, b.flow_y) for a, b in itertools.pairwise(obs)]
+    steps = steps[-params.window :]
+    out = np.ones(grid.shape)
+    for r in range(grid.rows):
+        for c in range(grid.columns):
+            x0, y0 = grid.x_min + c * grid.cell_width_m, grid.y_min + r * grid.cell_height_m
+            lag = vx = vy = 0.0
+            for dt, ux, uy in reversed(steps):
+                lag, vx, vy = lag + dt, vx + ux * dt, vy + uy * dt
+                px = cell_mass(x0, x0 + grid.cell_width_m, xv - vx, params.sigma_x * math.sqrt(lag))
+                py = cell_mass(y0, y0 + grid.cell_height_m, yv - vy, params.sigma_y * math.sqrt(lag))
+                out[r, c] *= 1.0 - params.mu * px * py
+    return out
+
+
+def history_then(mapper: PomdpMapper | BayesMapper, ticks: int, flow: tuple[float, float]) -> float:
+    """Fill the flow history with the vehicle outside the area (nothing fused); returns the next time."""
+    for t in range(ticks):
+        assert not mapper.update(Observation(float(t), -10.0, -60.0, flow[0], flow[1], False))
+    return float(ticks)
+
+
+def test_registered() -> None:
+    assert MAPPERS["pomdp"] is PomdpMapper
+    assert isinstance(make_mapper("pomdp", SMALL), PomdpMapper)
+
+
+@pytest.mark.parametrize("detected", [True, False])
+def test_update_is_eq6_with_the_eq2_product(detected: bool) -> None:
+    rng = np.random.default_rng(5)
+    params = MapperParams(window=9, sigma_x=0.5, sigma_y=0.8, mu=0.85, false_alarm=0.02)
+    mapper = PomdpMapper(SMALL, params)
+    times = np.cumsum(rng.uniform(0.3, 1.8, size=14))
+    flows = rng.normal(0, 1.0, (14, 2))
+    obs = [
+        Observation(float(t), -5.0, -5.0, float(ux), float(uy), False)
+        for t, (ux, uy) in zip(times, flows, strict=True)
+    ]
+    obs[-1] = Observation(obs[-1].time_s, 8.7, 5.1, obs[-1].flow_x, obs[-1].flow_y, detected)
+    for o in obs:
+        mapper.update(o)
+    gamma = non_detection(SMALL, obs, params)
+    assert gamma.min() < 0.5  # some source cells would very likely have been seen
+    cell = SMALL.cell_of(8.7, 5.1)
+    np.testing.assert_allclose(np.exp(mapper.log_gamma(cell)), gamma, rtol=1e-12)
+    hit = 1.0 - 0.98 * gamma
+    np.testing.assert_allclose(mapper.detection_likelihood(cell), hit, rtol=1e-12)
+    likelihood = hit if detected else 1.0 - hit
+    np.testing.assert_allclose(mapper.likelihood, likelihood / likelihood.sum(), rtol=1e-12)
+
+
+def test_series_terms_meet_their_tolerance() -> None:
+    peaks = np.concatenate([np.geomspace(1e-14, 0.5, 200), [0.0, 0.6, 0.99, 1.0]])
+    terms = series_terms(peaks, 1e-12)
+    for a, k in zip(peaks, terms, strict=True):
+        if a > 0.5:
+            assert k == 0
+        elif k > 0:
+            partial = -sum(a**j / j for j in range(1, k + 1))
+            assert abs(partial - math.log1p(-a)) <= 1e-12
+    assert terms[0] == 1
+    assert (terms[:200] > 0).sum() > 150  # most small peaks go by the series
+
+
+def random_factors(
+    rng: np.random.Generator, grid: Grid, window: int, dt: tuple[float, float], sigma: tuple[float, float]
+) -> tuple[np.ndarray, np.ndarray]:
+    steps = rng.uniform(*dt, size=window)
+    steps[0] = dt[0]  # the shortest lag, where the filament is most concentrated
+    lag = np.cumsum(steps)
+    flow = rng.normal(0.0, 1.5, size=(window, 2)) + rng.normal(0.0, 1.0, size=2)
+    drift = np.cumsum(flow * steps[:, None], axis=0)
+    x = rng.uniform(grid.x_min, grid.x_max)
+    y = rng.uniform(grid.y_min, grid.y_max)
+    return filament_factors(grid, x, y, lag, drift[:, 0], drift[:, 1], *sigma)
+
+
+CASES = {
+    "1 m cells, mixed lags": (Grid(0, 100, -50, 50, 100, 100), 200, (0.2, 2.0), (1.0, 1.0), 0.9),
+    "fine cells, long lags": (Grid(0, 100, -50, 50, 200, 160), 150, (0.5, 3.0), (1.5, 0.7), 0.9),
+    "large cells": (Grid(0, 400, 0, 400, 40, 40), 200, (0.1, 1.0), (0.5, 0.3), 0.9),
+    "large cells, mu = 1": (Grid(0, 400, 0, 300, 40, 30), 200, (0.1, 1.0), (0.2, 0.2), 1.0),
+    "strips": (Grid(0, 300, 0, 10, 600, 4), 120, (0.05, 1.0), (0.8, 0.1), 0.95),
+}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_fast_log_gamma_matches_the_naive_sum(case: str) -> None:
+    grid, window, dt, sigma, mu = CASES[case]
+    assert window * grid.size > WHOLE_DIRECT_SIZE  # the split path, not the small-problem one
+    rng = np.random.default_rng(abs(hash(case)) % 2**32)
+    for _ in range(3):
+        px, py = random_factors(rng, grid, window, dt, sigma)
+        with np.errstate(divide="ignore"):
+            naive = np.log1p(-mu * py[:, :, None] * px[:, None, :]).sum(axis=0)
+        fast = log_non_detection(px, py, mu)
+        np.testing.assert_allclose(np.exp(fast), np.exp(naive), rtol=0, atol=1e-9)
+        seen = np.isfinite(naive)
+        np.testing.assert_array_equal(np.isfinite(fast), seen)
+        np.testing.assert_allclose(fast[seen], naive[seen], rtol=1e-9, atol=1e-10)
+
+
+def test_naive_cases_cover_both_paths() -> None:
+    rng = np.random.default_rng(0)
+    grid, window, dt, sigma, mu = CASES["1 m cells, mixed lags"]
+    px, py = random_factors(rng, grid, window, dt, sigma)
+    terms = series_terms(mu * px.max(axis=1) * py.max(axis=1))
+    assert terms[0] == 0  # the shortest lag is concentrated: evaluated directly on its box
+    assert (terms > 0).sum() > window // 2  # long lags: by the series
+
+
+def test_mu_one_filament_certainly_there_rules_the_cell_out() -> None:
+    # zero spread: a filament released 1 s ago from C_i is certainly in the vehicle's cell
+    grid = Grid(0, 10, 0, 10, 10, 10)
+    params = MapperParams(window=5, sigma_x=0.0, sigma_y=0.0, mu=1.0, false_alarm=0.0)
+    mapper = PomdpMapper(grid, params)
+    mapper.update(Observation(0.0, 5.5, 5.5, 2.0, 0.0, False))
+    mapper.update(Observation(1.0, 5.5, 5.5, 2.0, 0.0, False))
+    pi = mapper.likelihood
+    assert pi[5, 3] == 0.0  # two cells upflow
+    assert pi.sum() == pytest.approx(1.0)
+    assert pi.max() == pytest.approx(1.0 / 99)
+
+
+def test_non_detection_removes_mass_just_upflow() -> None:
+    mapper = PomdpMapper(FIELD, MapperParams(window=40))
+    t = history_then(mapper, 40, (1.0, 0.0))
+    mapper.update(Observation(t, 61.0, 1.0, 1.0, 0.0, False))
+    pi = mapper.likelihood
+    row, col = FIELD.row_col(FIELD.cell_of(61.0, 1.0))
+    uniform = 1.0 / FIELD.size
+    for upflow in (2, 5, 10):  # 4, 10 and 20 m upflow of the vehicle
+        assert pi[row, col - upflow] < 0.75 * uniform
+        assert pi[row, col - upflow] < pi[row, col + upflow]
+    assert pi[row, col + 10] > uniform
+    assert pi[row + 20, col] > uniform
+
+
+def test_agrees_with_bayes_where_filaments_are_unlikely() -> None:
+    # 1 - prod(1 - mu p_l) = mu sum p_l to first order: the two models differ only near the vehicle
+    params = MapperParams(window=40, false_alarm=0.0)
+    pomdp, bayes = PomdpMapper(FIELD, params), BayesMapper(FIELD, params)
+    history_then(pomdp, 40, (0.8, -0.3))
+    history_then(bayes, 40, (0.8, -0.3))
+    cell = FIELD.cell_of(61.0, 1.0)
+    hit_pomdp, hit_bayes = pomdp.detection_likelihood(cell), bayes.detection_likelihood(cell)
+    faint = (hit_bayes > 1e-6) & (hit_bayes < 1e-3)
+    assert faint.sum() > 100
+    np.testing.assert_allclose(hit_pomdp[faint], hit_bayes[faint], rtol=2e-3)
+    assert (hit_pomdp <= hit_bayes + 1e-15).all()  # 1 - prod(1 - x_l) <= sum x_l

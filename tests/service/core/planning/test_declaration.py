@@ -1,0 +1,227 @@
+import math
+
+import numpy as np
+import pytest
+
+from service.core.config import DeclarationConfig, DeclarationRule
+from service.core.grid import Grid
+from service.core.observation import Observation
+from service.core.planning.declaration import Declarer, mass_within, steady_odour
+
+G = Grid(0.0, 5.0, 0.0, 5.0, columns=5, rows=5)  # 1 m cells
+
+
+def peaked(cell: int, peak: float = 0.3) -> np.ndarray:
+    rest = (1.0 - peak) / (G.size - 1)
+    pi = np.full(G.shape, rest)
+    pi.flat[cell] = peak
+    return pi
+
+
+def test_mass_within_radius_by_hand() -> None:
+    pi = np.arange(25, dtype=float).reshape(5, 5)
+    pi /= pi.sum()  # total 300
+    centre = G.cell_of(2.5, 2.5)  # flat 12
+    # radius 1: the cell and its four side neighbours (7, 11, 13, 17); diagonals are sqrt(2) away
+    assert mass_within(G, pi, centre, 1.0) == pytest.approx((12 + 7 + 11 + 13 + 17) / 300)
+    assert mass_within(G, pi, centre, 1.5) == pytest.approx((6 + 7 + 8 + 11 + 12 + 13 + 16 + 17 + 18) / 300)
+    assert mass_within(G, pi, centre, 0.0) == pytest.approx(12 / 300)
+    corner = G.cell_of(0.5, 0.5)  # flat 0: only 1 and 5 are within 1 m, inside the area
+    assert mass_within(G, pi, corner, 1.0) == pytest.approx((0 + 1 + 5) / 300)
+
+
+def test_stable_rule_fires_after_30_s_unchanged() -> None:
+    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.STABLE]))
+    assert d.update(0.0, peaked(3)) is None  # not armed yet
+    d.arm(100.0, peaked(3))
+    for t in range(101, 130):
+        assert d.update(float(t), peaked(3)) is None
+    found = d.update(130.0, peaked(3))
+    assert found is not None
+    assert found.rules == (DeclarationRule.STABLE,)
+    assert found.cell == 3
+    assert found.paper_cell == G.paper_number(3)
+    assert (found.x, found.y) == G.centre(3)
+    assert found.probability == pytest.approx(0.3)
+
+
+def test_a_new_estimate_restarts_the_clock() -> None:
+    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.STABLE], stable_s=30.0))
+    d.arm(0.0, peaked(3))
+    assert d.update(10.0, peaked(7)) is None  # changed at t = 10
+    assert d.update(39.0, peaked(7)) is None
+    found = d.update(40.0, peaked(7))
+    assert found is not None
+    assert found.cell == 7
+
+
+def test_fractional_ticks_reach_the_mark() -> None:
+    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.STABLE], stable_s=3.0))
+    d.arm(0.0, peaked(3))
+    t, found = 0.0, None
+    for _ in range(30):  # 0.1 s ticks summed in floating point: 2.9999999999999996
+        t += 0.1
+        found = d.update(t, peaked(3))
+    assert found is not None
+
+
+def test_mass_rule_and_which_fired() -> None:
+    config = DeclarationConfig(
+        rules=[DeclarationRule.MASS, DeclarationRule.STABLE], probability=0.6, radius_m=1.0
+    )
+    d = Declarer(G, config)
+    centre = G.cell_of(2.5, 2.5)
+    d.arm(0.0, peaked(centre, 0.2))
+    # 0.5 at the centre, 0.04 on each side neighbour: 0.66 within 1 m
+    pi = np.full(G.shape, (1.0 - 0.5 - 4 * 0.04) / 20)
+    pi.flat[centre] = 0.5
+    for side in (7, 11, 13, 17):
+        pi.flat[side] = 0.04
+    found = d.update(1.0, pi)
+    assert found is not None
+    assert found.rules == (DeclarationRule.MASS,)
+    assert found.mass == pytest.approx(0.66)
+    # the estimate has been the centre since arming at t = 0: at t = 30 both fire, in the
+    # configured order
+    only_mass = d.update(29.0, pi)
+    assert only_mass is not None
+    assert only_mass.rules == (DeclarationRule.MASS,)
+    both = d.update(30.0, pi)
+    assert both is not None
+    assert both.rules == (DeclarationRule.MASS, DeclarationRule.STABLE)
+
+
+def test_mass_rule_alone_ignores_a_stable_but_flat_map() -> None:
+    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=1.0))
+    d.arm(0.0, peaked(12, 0.1))
+    assert all(d.update(float(t), peaked(12, 0.1)) is None for t in range(1, 100))
+
+
+def test_confirm_waits_for_the_rule_to_keep_firing() -> None:
+    config = DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0, confirm_s=5.0)
+    d = Declarer(G, config)
+    d.arm(0.0, peaked(12, 0.6))
+    assert d.update(1.0, peaked(12, 0.6)) is None  # fires from t = 1 on
+    assert d.update(5.0, peaked(12, 0.6)) is None
+    assert d.update(5.5, peaked(12, 0.4)) is None  # stops firing: the wait starts again
+    assert d.update(6.0, peaked(12, 0.6)) is None
+    assert d.update(10.9, peaked(12, 0.6)) is None
+    found = d.update(11.0, peaked(12, 0.6))
+    assert found is not None
+    assert found.cell == 12
+
+
+def test_the_hmm_gets_its_own_mass_threshold() -> None:
+    config = DeclarationConfig(probability=0.95, hmm_probability=0.25)
+    assert config.for_mapper("hmm").probability == 0.25
+    assert config.for_mapper("pomdp").probability == 0.95
+    assert config.for_mapper("bayes") == config
+    assert config.for_mapper("scripted") == config  # a mapper outside the registry: unchanged
+
+
+def test_upflow_pass_waits_until_the_vehicle_has_been_upflow_of_the_estimate() -> None:
+    config = DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0, upflow_pass_m=1.0)
+    d = Declarer(G, config)
+    pi = peaked(12, 0.6)  # centre (2.5, 2.5); flow toward +x, so upflow is -x
+    d.arm(0.0, pi)
+    east = (1.0, 0.0)
+    assert d.update(1.0, pi, (3.0, 2.5), east) is None  # downflow of the centre
+    assert d.update(2.0, pi, (2.0, 2.5), east) is None  # 0.5 m upflow: not far enough
+    assert d.update(3.0, pi, (1.5, 2.5)) is None  # no flow given: cannot tell upflow
+    found = d.update(4.0, pi, (1.5, 2.5), (2.0, 0.0))  # 1 m upflow (the flow's length does not matter)
+    assert found is not None
+    assert found.cell == 12
+    # a pass, once made, holds for that cell; a new estimate needs its own
+    assert d.update(5.0, pi, (2.5, 2.5), east) is not None
+    other = peaked(13, 0.6)  # centre (3.5, 2.5)
+    assert d.update(6.0, other, (2.5, 2.5), east) is not None  # (2.5, 2.5) is 1 m upflow of it
+    d.arm(7.0, other)
+    assert d.update(8.0, other, (3.0, 2.5), east) is None
+    # far upflow but more than visit_radius_m across the flow line does not count
+    assert d.update(9.0, other, (1.5, 6.0), (1.0, 0.0)) is None
+    assert d.update(10.0, other, (3.5, 2.5), east) is None
+
+
+def test_upflow_pass_is_off_by_default_and_for_the_hmm() -> None:
+    assert DeclarationConfig().upflow_pass_m == 0.0
+    config = DeclarationConfig(upflow_pass_m=2.0)
+    assert config.for_mapper("hmm").upflow_pass_m == 0.0
+    assert config.for_mapper("pomdp").upflow_pass_m == 2.0
+
+
+def test_persist_waits_for_odour_near_the_estimate_at_two_times_far_enough_apart() -> None:
+    config = DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0, persist_s=20.0)
+    d = Declarer(G, config)
+    pi = peaked(12, 0.6)  # centre (2.5, 2.5); visit radius 3 m
+    d.arm(0.0, pi)
+    assert d.update(1.0, pi, (2.5, 2.5), detected=True) is None  # odour once: no span yet
+    assert d.update(11.0, pi, (2.0, 2.5), detected=True) is None  # 10 s apart
+    assert d.update(15.0, pi, (2.5, 2.5)) is None  # no odour: the span is still 10 s
+    assert d.update(20.0, pi, (4.9, 4.9), detected=True) is None  # 3.4 m away: not near the estimate
+    found = d.update(21.0, pi, (3.0, 2.0), detected=True)  # near it, 20 s after the first
+    assert found is not None
+    assert found.cell == 12
+
+
+def test_persist_is_off_by_default_and_for_the_hmm() -> None:
+    assert DeclarationConfig().persist_s == 0.0
+    assert DeclarationConfig(persist_s=20.0).for_mapper("hmm").persist_s == 0.0
+    assert DeclarationConfig(persist_s=20.0).for_mapper("pomdp").persist_s == 20.0
+    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0))
+    pi = peaked(12, 0.6)
+    d.arm(0.0, pi)
+    assert d.update(1.0, pi, (2.5, 2.5)) is not None  # no odour needed at all
+
+
+def test_admit_ignores_a_rule_for_a_refused_cell() -> None:
+    # the benchmark's perfect guard: the same peaked map fires for an admitted cell only
+    config = DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0)
+    refused = Declarer(G, config, admit=lambda cell: cell != 12)
+    refused.arm(0.0, peaked(12, 0.6))
+    assert all(refused.update(float(t), peaked(12, 0.6)) is None for t in range(1, 20))
+    admitted = Declarer(G, config, admit=lambda cell: cell == 12)
+    admitted.arm(0.0, peaked(12, 0.6))
+    found = admitted.update(1.0, peaked(12, 0.6))
+    assert found is not None
+    assert found.cell == 12
+
+
+def odour_record(hits: list[bool], x: float = 0.0) -> list[Observation]:
+    """One tick a second at (x, 0) under a flow East, odour as ``hits`` says."""
+    return [Observation(float(t), x, 0.0, 1.0, 0.0, hit) for t, hit in enumerate(hits)]
+
+
+STEADY = DeclarationConfig(steady_hit_rate=0.75)
+
+
+def test_steady_odour_asks_for_the_share_the_ticks_and_the_time_since_contact() -> None:
+    four_in_five = [t % 5 != 4 for t in range(60)]
+    assert steady_odour(odour_record(four_in_five), 0.0, 0.0, 0.0, (1.0, 0.0), STEADY)
+    # the window is the last 60 s: 40 dry seconds before it do not count
+    assert steady_odour(odour_record([False] * 40 + four_in_five), 0.0, 0.0, 0.0, (1.0, 0.0), STEADY)
+    assert not steady_odour(odour_record([t % 3 != 2 for t in range(60)]), 0.0, 0.0, 0.0, (1.0, 0.0), STEADY)
+    assert not steady_odour(
+        odour_record(four_in_five), 0.0, 0.0, 25.0, (1.0, 0.0), STEADY
+    )  # contact 35 s ago
+    assert not steady_odour(odour_record(four_in_five), 0.0, 0.0, None, (1.0, 0.0), STEADY)
+    # 2.5 m away: none of the ticks is near the place
+    assert not steady_odour(odour_record(four_in_five, x=2.5), 0.0, 0.0, 0.0, (1.0, 0.0), STEADY)
+    nine = odour_record([True] * 9)
+    assert not steady_odour(nine, 0.0, 0.0, -40.0, (1.0, 0.0), STEADY)  # fewer than 10 ticks near it
+    assert steady_odour(nine, 0.0, 0.0, -40.0, (1.0, 0.0), STEADY.model_copy(update={"steady_min_ticks": 9}))
+
+
+def test_steady_odour_is_refused_under_a_turned_flow_and_off_by_default() -> None:
+    record = odour_record([True] * 60)
+    assert steady_odour(record, 0.0, 0.0, 0.0, (math.cos(0.1), math.sin(0.1)), STEADY)  # 5.7 degrees
+    assert not steady_odour(record, 0.0, 0.0, 0.0, (math.cos(0.11), math.sin(0.11)), STEADY)  # 6.3
+    assert not steady_odour(record, 0.0, 0.0, 0.0, (1.0, 0.0), DeclarationConfig())
+
+
+def test_steady_odour_can_ask_for_the_odour_to_span_a_time() -> None:
+    # odour in 4 ticks of 5 over the last 25 s only, near the place for 25 ticks
+    record = odour_record([t % 5 != 4 for t in range(25)])
+    assert steady_odour(record, 0.0, 0.0, -40.0, (1.0, 0.0), STEADY)
+    spanning = STEADY.model_copy(update={"steady_min_span_s": 30.0})
+    assert not steady_odour(record, 0.0, 0.0, -40.0, (1.0, 0.0), spanning)
+    assert steady_odour(odour_record([t % 5 != 4 for t in range(40)]), 0.0, 0.0, -40.0, (1.0, 0.0), spanning)

@@ -1,0 +1,810 @@
+import itertools
+import math
+from collections import deque
+
+import numpy as np
+import pytest
+
+from service.core.config import (
+    DeclarationConfig,
+    DeclarationRule,
+    PlanningConfig,
+    PlanningMethod,
+    build_config,
+)
+from service.core.grid import Grid
+from service.core.mapping.belief import FloatArray
+from service.core.mapping.hmm import HmmMapper
+from service.core.mapping.mapper import SourceMapper
+from service.core.mission import (
+    CrossCheck,
+    Mission,
+    MissionOutput,
+    MissionState,
+    PlumeFound,
+    PlumeLost,
+    SourceDeclared,
+)
+from service.core.observation import Observation
+from service.core.planning import PLANNERS
+from service.core.planning.base import VehicleState, Waypoint
+
+
+class ScriptedMapper(SourceMapper):
+    """A mapper whose source map the test sets; its detection model is a fixed random table."""
+
+    name = "scripted"
+
+    def __init__(self, grid: Grid, seed: int = 0) -> None:
+        super().__init__(grid)
+        self._table = np.random.default_rng(seed).uniform(0.0, 0.5, size=(grid.size, *grid.shape))
+
+    def set(self, pi: FloatArray) -> None:
+        self._pi = pi / pi.sum()
+
+    def peak_at(self, cell: int, peak: float = 0.5) -> None:
+        pi = np.full(self.grid.shape, (1.0 - peak) / max(self.grid.size - 1, 1))
+        pi.flat[cell] = peak
+        self.set(pi)
+
+    def _assimilate(self, cell: int, detected: bool) -> None:
+        pass
+
+    def detection_likelihood(self, cell: int) -> FloatArray:
+        out: FloatArray = self._table[cell]
+        return out
+
+
+NEVER = DeclarationConfig(rules=[DeclarationRule.STABLE], stable_s=1e9)
+"""Declaration off, for tests of the other states."""
+
+# -- independent references ---------------------------------------------------------------------
+
+
+def overlaps(grid: Grid, row: int, col: int) -> bool:
+    """Does cell (row, col) overlap an obstacle rectangle with positive area?"""
+    x0 = grid.x_min + col * grid.cell_width_m
+    y0 = grid.y_min + row * grid.cell_height_m
+    x1, y1 = x0 + grid.cell_width_m, y0 + grid.cell_height_m
+    return any(
+        min(x1, bx1) > max(x0, bx0) and min(y1, by1) > max(y0, by0) for bx0, by0, bx1, by1 in grid.obstacles
+    )
+
+
+def in_rectangle(grid: Grid, x: float, y: float) -> bool:
+    return any(bx0 <= x <= bx1 and by0 <= y <= by1 for bx0, by0, bx1, by1 in grid.obstacles)
+
+
+def assert_safe_waypoint(grid: Grid, w: Waypoint) -> None:
+    assert grid.x_min <= w.x <= grid.x_max, w
+    assert grid.y_min <= w.y <= grid.y_max, w
+    assert not in_rectangle(grid, w.x, w.y), w
+    col = min(int((w.x - grid.x_min) / grid.cell_width_m), grid.columns - 1)
+    row = min(int((w.y - grid.y_min) / grid.cell_height_m), grid.rows - 1)
+    # a point on a cell boundary belongs to both cells: neither may be an obstacle cell
+    cols = {col, max(col - 1, 0)} if math.isclose((w.x - grid.x_min) / grid.cell_width_m % 1, 0) else {col}
+    rows = {row, max(row - 1, 0)} if math.isclose((w.y - grid.y_min) / grid.cell_height_m % 1, 0) else {row}
+    assert not any(overlaps(grid, r, c) for r in rows for c in cols), w
+
+
+def assert_clear_leg(grid: Grid, a: tuple[float, float], b: tuple[float, float]) -> None:
+    for t in np.linspace(0.0, 1.0, 101):
+        x, y = a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])
+        assert not in_rectangle(grid, x, y), (a, b)
+
+
+def free_mask(grid: Grid) -> np.ndarray:
+    return np.array([[not overlaps(grid, r, c) for c in range(grid.columns)] for r in range(grid.rows)])
+
+
+def bfs(free: np.ndarray, start: tuple[int, int]) -> np.ndarray:
+    n, m = free.shape
+    seen = np.zeros_like(free)
+    seen[start] = True
+    queue = deque([start])
+    while queue:
+        r, c = queue.popleft()
+        for dr, dc in itertools.product((-1, 0, 1), repeat=2):
+            rr, cc = r + dr, c + dc
+            if not (0 <= rr < n and 0 <= cc < m) or not free[rr, cc] or seen[rr, cc]:
+                continue
+            if dr and dc and not (free[r + dr, c] and free[r, c + dc]):
+                continue
+            seen[rr, cc] = True
+            queue.append((rr, cc))
+    out: np.ndarray = seen & free
+    return out
+
+
+def random_area(rng: np.random.Generator) -> Grid:
+    m, n = int(rng.integers(3, 11)), int(rng.integers(3, 11))
+    lx, ly = float(rng.uniform(1.0, 5.0)), float(rng.uniform(1.0, 5.0))
+    x0, y0 = float(rng.uniform(-50, 50)), float(rng.uniform(-50, 50))
+    boxes = []
+    for _ in range(int(rng.integers(0, 6))):
+        bx, by = x0 + rng.uniform(0, m * lx), y0 + rng.uniform(0, n * ly)
+        boxes.append((bx, by, bx + rng.uniform(0.2, 3) * lx, by + rng.uniform(0.2, 3) * ly))
+    return Grid(x0, x0 + m * lx, y0, y0 + n * ly, columns=m, rows=n, obstacles=tuple(boxes))
+
+
+class Vehicle:
+    """A vehicle that reaches its current target in one tick and then takes the next one."""
+
+    def __init__(self, x: float, y: float) -> None:
+        self.x, self.y = x, y
+        self.queue: list[Waypoint] = []
+
+    def follow(self, waypoints: tuple[Waypoint, ...] | None) -> None:
+        if waypoints is not None:
+            self.queue = list(waypoints)
+
+    def move(self) -> None:
+        if self.queue:
+            w = self.queue.pop(0)
+            self.x, self.y = w.x, w.y
+
+    @property
+    def state(self) -> VehicleState:
+        return VehicleState(self.x, self.y, 0.0)
+
+
+# -- safety invariants over many random maps ----------------------------------------------------
+
+
+@pytest.mark.parametrize("method", sorted(PLANNERS))
+def test_no_unsafe_waypoint_on_random_maps(method: str) -> None:
+    rng = np.random.default_rng(sum(map(ord, method)))
+    planning = PlanningConfig(method=PlanningMethod(method), mldp_steps=4, lost_after_s=3.0, cast_legs=2)
+    emitted = started_inside = 0
+    states: set[MissionState] = set()
+    for trial in range(80):
+        grid = random_area(rng)
+        mapper = ScriptedMapper(grid, seed=trial)
+        mission = Mission(grid, mapper, planning, NEVER)
+        # anywhere, including inside obstacles and a little outside the area
+        vx = float(rng.uniform(grid.x_min - 3, grid.x_max + 3))
+        vy = float(rng.uniform(grid.y_min - 3, grid.y_max + 3))
+        vehicle = Vehicle(vx, vy)
+        started_inside += in_rectangle(grid, vx, vy)
+        for t in range(15):
+            mapper.set(rng.random(grid.shape) ** 4)
+            flow = rng.normal(0.0, 1.0, size=2)
+            obs = Observation(
+                float(t), vehicle.x, vehicle.y, float(flow[0]), float(flow[1]), bool(rng.random() < 0.3)
+            )
+            before = (vehicle.x, vehicle.y)
+            out = mission.step(obs, vehicle.state)
+            states.add(out.state)
+            if out.waypoints is not None:
+                emitted += 1
+                assert out.waypoints, "an emitted plan is never empty"
+                for w in out.waypoints:
+                    assert_safe_waypoint(grid, w)
+                legs = [(w.x, w.y) for w in out.waypoints]
+                # the leg from the vehicle too, unless it is inside an obstacle (no leg can be clear)
+                if not in_rectangle(grid, *before):
+                    legs = [before, *legs]
+                for a, b in itertools.pairwise(legs):
+                    assert_clear_leg(grid, a, b)
+            vehicle.follow(out.waypoints)
+            vehicle.move()
+    # the cases that matter were met: every state, and vehicles starting inside an obstacle
+    assert emitted > 400
+    assert states == {MissionState.FIND, MissionState.TRACE, MissionState.LOST}
+    assert started_inside > 3
+
+
+def test_reaches_the_estimate_whenever_a_path_exists() -> None:
+    rng = np.random.default_rng(2024)
+    reached = fell_back = 0
+    for trial in range(60):
+        grid = random_area(rng)
+        free = free_mask(grid)
+        if not free.any():
+            continue
+        row, col = (int(v) for v in rng.choice(np.argwhere(free)))
+        start = (row, col)
+        goal = int(rng.integers(0, grid.size))
+        mapper = ScriptedMapper(grid, seed=trial)
+        mapper.peak_at(goal)
+        mission = Mission(grid, mapper, PlanningConfig(), NEVER)
+        x, y = grid.centre(start[0] * grid.columns + start[1])
+        vehicle = Vehicle(x, y)
+        visited: set[int] = set()
+        for t in range(2 * grid.size + 2):
+            obs = Observation(float(t), vehicle.x, vehicle.y, 0.3, 0.1, True)
+            out = mission.step(obs, vehicle.state)
+            assert mission.state is MissionState.TRACE
+            vehicle.follow(out.waypoints)
+            vehicle.move()
+            visited.add(grid.cell_of(vehicle.x, vehicle.y))
+        reach = bfs(free, start)
+        here = grid.cell_of(vehicle.x, vehicle.y)
+        if reach.flat[goal]:
+            # at the estimate, an undeclared mission probes the neighbour upflow and comes back,
+            # so the vehicle ends at the goal or next to it, having reached it
+            assert goal in visited, f"trial {trial}: never reached goal {goal}, which was reachable"
+            (hr, hc), (gr, gc) = grid.row_col(here), grid.row_col(goal)
+            assert max(abs(hr - gr), abs(hc - gc)) <= 1, f"trial {trial}: stopped in {here}, goal {goal}"
+            reached += 1
+        else:
+            # no path: the mission went to the reachable cell nearest the estimate, without error
+            # (and from there probes upflow, so it need not end there)
+            gx, gy = grid.centre(goal)
+            dist = [math.dist(grid.centre(int(c)), (gx, gy)) for c in np.flatnonzero(reach)]
+            assert reach.flat[here]
+            nearest = min(math.dist(grid.centre(c), (gx, gy)) for c in visited)
+            assert nearest == pytest.approx(min(dist))
+            fell_back += 1
+    assert reached > 20
+    assert fell_back > 5
+
+
+# -- the state machine --------------------------------------------------------------------------
+
+AREA = Grid(0.0, 100.0, -50.0, 50.0, columns=20, rows=20)  # 5 m cells
+SOURCE = AREA.cell_of(22.0, 3.0)
+
+
+def mission_with(mapper: SourceMapper, **declaration: object) -> Mission:
+    planning = PlanningConfig(lost_after_s=10.0, cast_width_m=10.0, cast_legs=2, zigzag_spacing_m=10.0)
+    decl = DeclarationConfig(**declaration)  # type: ignore[arg-type]
+    return Mission(AREA, mapper, planning, decl)
+
+
+def test_find_trace_lose_recover_declare() -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.05)
+    # the rules, not the visit gate, are under test here: the vehicle is far from the estimate
+    mission = mission_with(
+        mapper, rules=[DeclarationRule.STABLE], stable_s=30.0, radius_m=5.0, visit_radius_m=1e6
+    )
+    v = VehicleState(90.0, -40.0)
+    flow = (1.0, 0.0)
+
+    def tick(t: float, detected: bool = False) -> tuple:  # type: ignore[type-arg]
+        out = mission.step(Observation(t, v.x, v.y, *flow, detected), v)
+        return out.state, out.events, out.waypoints
+
+    # FIND: a zigzag across the flow (flow East: the first leg runs North, across it)
+    state, events, wps = tick(0.0)
+    assert state is MissionState.FIND
+    assert events == ()
+    assert wps is not None
+    # a leg clear of obstacles is flown straight to the turning point itself, not along A*'s cells
+    assert wps == (Waypoint(90.0, AREA.y_centres[-1]),)
+    assert wps[-1].y == pytest.approx(AREA.y_centres[-1])
+    assert tick(1.0)[2] is None  # nothing changed: keep flying
+    # the first detection: TRACE toward the estimate
+    state, events, wps = tick(5.0, detected=True)
+    assert state is MissionState.TRACE
+    assert events == (PlumeFound(5.0, 90.0, -40.0, first=True),)
+    assert wps is not None
+    assert (wps[-1].x, wps[-1].y) == AREA.centre(SOURCE)
+    # no detection for lost_after_s: LOST, and a cast across the flow at the last detection
+    assert tick(14.0)[0] is MissionState.TRACE
+    state, events, wps = tick(15.0)
+    assert state is MissionState.LOST
+    assert events == (PlumeLost(15.0, 90.0, -40.0, last_detection_s=5.0),)
+    assert wps is not None
+    # the first cast leg: 10 m across the flow (North), flown straight to that turning point
+    assert wps == (Waypoint(90.0, -30.0),)
+    # a detection ends LOST
+    state, events, _ = tick(20.0, detected=True)
+    assert state is MissionState.TRACE
+    assert events == (PlumeFound(20.0, 90.0, -40.0, first=False),)
+    # the estimate has not moved since the first detection: declared at t = 5 + 30
+    for t in range(21, 35):
+        assert tick(float(t), detected=True)[0] is MissionState.TRACE
+    state, events, wps = tick(35.0, detected=True)
+    assert state is MissionState.DECLARED
+    x, y = AREA.centre(SOURCE)
+    (declared,) = events
+    assert isinstance(declared, SourceDeclared)
+    rule = (DeclarationRule.STABLE,)
+    assert declared == SourceDeclared(
+        35.0, x, y, AREA.paper_number(SOURCE), declared.probability, declared.mass, rule
+    )
+    assert declared.probability == pytest.approx(0.05)
+    # radius 5 m on 5 m cells: the cell and its four side neighbours, (1 - 0.05) / 399 each
+    assert declared.mass == pytest.approx(0.05 + 4 * 0.95 / 399)
+    assert wps == (Waypoint(v.x, v.y),)  # hold where it is
+    # declared is final: no more waypoints or events, the map keeps updating
+    state, events, wps = tick(36.0, detected=True)
+    assert (state, events, wps) == (MissionState.DECLARED, (), None)
+
+
+def test_mass_rule_declares_and_says_so() -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.9)
+    mission = mission_with(
+        mapper, rules=[DeclarationRule.STABLE, DeclarationRule.MASS], probability=0.8, visit_radius_m=1e6
+    )
+    v = VehicleState(50.0, 0.0)
+    out = mission.step(Observation(0.0, v.x, v.y, 1.0, 0.0, False), v)
+    assert out.state is MissionState.FIND  # no rule is judged before the first detection
+    out = mission.step(Observation(1.0, v.x, v.y, 1.0, 0.0, True), v)
+    assert out.state is MissionState.DECLARED
+    (found, declared) = out.events
+    assert isinstance(found, PlumeFound)
+    assert isinstance(declared, SourceDeclared)
+    assert declared.rules == (DeclarationRule.MASS,)
+
+
+def test_no_rule_fires_before_the_vehicle_visits_the_estimate() -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.9)
+    mission = mission_with(mapper, rules=[DeclarationRule.MASS], probability=0.8, visit_radius_m=3.0)
+    far = VehicleState(50.0, 0.0)
+    sx, sy = AREA.centre(SOURCE)
+    assert math.dist((far.x, far.y), (sx, sy)) > 3.0
+    mission.step(Observation(0.0, far.x, far.y, 1.0, 0.0, True), far)
+    assert mission.state is MissionState.TRACE  # the map is sure, but nobody has looked there
+    near = VehicleState(sx + 2.0, sy)
+    out = mission.step(Observation(1.0, near.x, near.y, 1.0, 0.0, True), near)
+    assert out.state is MissionState.DECLARED
+
+
+def test_time_comes_only_from_the_observation() -> None:
+    mapper = ScriptedMapper(AREA)
+    mission = mission_with(mapper)
+    v = VehicleState(50.0, 0.0)
+    first = mission.step(Observation(10.0, v.x, v.y, 1.0, 0.0, False), v)
+    assert first.waypoints is not None
+    repeat = mission.step(Observation(10.0, v.x, v.y, 1.0, 0.0, True), v)
+    assert repeat.waypoints is None
+    assert repeat.events == ()
+    assert repeat.state is MissionState.FIND  # the repeated tick's detection was not taken
+    earlier = mission.step(Observation(9.0, v.x, v.y, 1.0, 0.0, True), v)
+    assert earlier.events == ()
+
+
+def test_unreachable_estimate_is_handled_without_error() -> None:
+    # the estimate sits inside a walled-off pocket: go to the nearest reachable cell and hold
+    walls = (
+        (40.0, 0.0, 60.0, 5.0),
+        (40.0, 15.0, 60.0, 20.0),
+        (40.0, 0.0, 45.0, 20.0),
+        (55.0, 0.0, 60.0, 20.0),
+    )
+    grid = Grid(0.0, 100.0, -50.0, 50.0, columns=20, rows=20, obstacles=walls)
+    pocket = grid.cell_of(50.0, 10.0)
+    assert not grid.obstacle_mask.flat[pocket]
+    mapper = ScriptedMapper(grid)
+    mapper.peak_at(pocket)
+    mission = Mission(grid, mapper, PlanningConfig(), NEVER)
+    vehicle = Vehicle(5.0, -45.0)
+    for t in range(60):
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 0.0, 1.0, t == 0), vehicle.state)
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+    here = grid.cell_of(vehicle.x, vehicle.y)
+    assert math.dist(grid.centre(here), grid.centre(pocket)) == pytest.approx(10.0)  # just outside a wall
+
+
+def test_with_the_hmm_mapper_end_to_end() -> None:
+    # a real mapper, every planner: the mission runs and stays safe on the paper's grid
+    grid = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25, obstacles=((60.0, 10.0, 80.0, 17.5),))
+    for method in sorted(PLANNERS):
+        mapper = HmmMapper(grid)
+        # declaration off: a declared mission holds, and this test is about the moving states
+        mission = Mission(grid, mapper, PlanningConfig(method=PlanningMethod(method)), NEVER)
+        vehicle = Vehicle(70.0, -40.0)
+        for t in range(20):
+            detected = 8 <= t <= 12
+            out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, detected), vehicle.state)
+            if out.waypoints is not None:
+                for w in out.waypoints:
+                    assert_safe_waypoint(grid, w)
+            vehicle.follow(out.waypoints)
+            vehicle.move()
+        assert mission.state in (MissionState.TRACE, MissionState.LOST)
+
+
+def test_states_are_the_zenoh_estimate_states() -> None:
+    # DESIGN.md: estimate.state is one of search, trace, lost, declared
+    assert [s.value for s in MissionState] == ["search", "trace", "lost", "declared"]
+
+
+def test_from_config() -> None:
+    config = build_config({}, ["planning.method=apf", "declaration.stable_s=12.5"])
+    mission = Mission.from_config(config, AREA, ScriptedMapper(AREA))
+    assert mission.planner.name == "apf"
+    assert mission.state is MissionState.FIND
+    with pytest.raises(ValueError, match="different grid"):
+        Mission.from_config(config, AREA, ScriptedMapper(Grid(0.0, 1.0, 0.0, 1.0, columns=1, rows=1)))
+
+
+def test_the_sweep_turns_with_the_mean_flow() -> None:
+    mapper = ScriptedMapper(AREA)
+    mission = Mission(AREA, mapper, PlanningConfig(), NEVER)
+    v = VehicleState(50.0, 0.0)
+    x_edges = (AREA.x_centres[0], AREA.x_centres[-1])
+    y_edges = (AREA.y_centres[0], AREA.y_centres[-1])
+    out = mission.step(Observation(0.0, v.x, v.y, 1.0, 0.0, False), v)
+    assert out.waypoints is not None
+    assert min(abs(out.waypoints[-1].y - e) for e in y_edges) < 1e-9  # legs run North-South
+    for t in range(1, 6):
+        mission.step(Observation(float(t), v.x, v.y, 1.0, 0.0, False), v)
+    # single noisy ticks across do not turn it (the mean flow is still East) ...
+    out = mission.step(Observation(6.0, v.x, v.y, 0.0, 3.0, False), v)
+    assert out.waypoints is None
+    # ... a lasting turn to North does: the legs now run East-West
+    last = None
+    for t in range(7, 20):
+        got = mission.step(Observation(float(t), v.x, v.y, 0.0, 1.0, False), v).waypoints
+        last = got if got is not None else last
+    assert last is not None
+    assert min(abs(last[-1].x - e) for e in x_edges) < 1e-9  # legs run East-West
+
+
+@pytest.mark.parametrize(
+    ("peak", "lost_trace_mass", "method", "casts"),
+    [
+        (0.3, 0.0, "astar", True),
+        (0.3, 0.2, "astar", False),
+        (0.1, 0.2, "astar", True),
+        (0.3, 0.2, "surge-cast", True),  # the map-free baseline casts whatever the map says
+    ],
+)
+def test_a_lost_plume_is_traced_on_while_the_estimate_holds_the_map(
+    peak: float, lost_trace_mass: float, method: str, casts: bool
+) -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, peak)  # 5 m cells, radius 3 m: the mass near the estimate is the peak's
+    planning = PlanningConfig(
+        method=PlanningMethod(method),
+        lost_after_s=10.0,
+        cast_width_m=10.0,
+        cast_legs=2,
+        lost_trace_mass=lost_trace_mass,
+    )
+    mission = Mission(AREA, mapper, planning, NEVER)
+    v = VehicleState(90.0, -40.0)
+    mission.step(Observation(4.0, v.x, v.y, 1.0, 0.0, False), v)  # a tick of flow for the surge
+    traced = mission.step(Observation(5.0, v.x, v.y, 1.0, 0.0, True), v).waypoints
+    assert traced is not None
+    out = mission.step(Observation(15.0, v.x, v.y, 1.0, 0.0, False), v)
+    assert out.state is MissionState.LOST
+    if casts:  # across the flow through the last detection
+        assert out.waypoints == (Waypoint(90.0, -30.0),)
+    else:  # on toward the estimate: the same waypoints, so none are sent again
+        assert (traced[-1].x, traced[-1].y) == AREA.centre(SOURCE)
+        assert out.waypoints is None
+
+
+@pytest.mark.parametrize(
+    ("peak", "ratio", "method", "sweeps"),
+    [
+        (None, 2.0, "astar", True),  # a uniform map: its estimate is merely the first cell
+        (0.00375, 2.0, "astar", True),  # 1.5 times the uniform share (1 / 400): no evidence
+        (0.00375, 0.0, "astar", False),  # off
+        (0.01, 2.0, "astar", False),  # 4 times: the map knows something, on toward its estimate
+        (None, 2.0, "surge-cast", False),  # the map-free baseline never sweeps again
+    ],
+)
+def test_a_cast_that_ends_with_a_flat_map_sweeps_again(
+    peak: float | None, ratio: float, method: str, sweeps: bool
+) -> None:
+    mapper = ScriptedMapper(AREA)
+    if peak is None:
+        mapper.set(np.ones(AREA.shape))
+    else:
+        mapper.peak_at(SOURCE, peak)
+    planning = PlanningConfig(
+        method=PlanningMethod(method), lost_after_s=10.0, cast_legs=0, flat_map_ratio=ratio
+    )
+    mission = Mission(AREA, mapper, planning, NEVER)
+    flow = (1.0, 0.0)
+    v = VehicleState(50.0, 10.0)
+    mission.step(Observation(4.0, v.x, v.y, *flow, False), v)
+    mission.step(Observation(5.0, v.x, v.y, *flow, True), v)
+    mission.step(Observation(6.0, v.x, v.y, *flow, True), v)  # two hits: not a lone contact
+    out = mission.step(Observation(16.0, v.x, v.y, *flow, False), v)  # lost; no cast legs
+    assert PlumeLost(16.0, v.x, v.y, 6.0) in out.events
+    if sweeps:  # a new sweep from here: upflow (West), first across the flow to the far side (South)
+        assert out.state is MissionState.FIND
+        assert out.waypoints is not None
+        assert out.waypoints[0] == Waypoint(50.0, AREA.y_centres[0])
+    else:  # on as it was going: the same waypoints, so none are sent again
+        assert out.state is MissionState.LOST
+        assert out.waypoints is None
+
+
+@pytest.mark.parametrize(
+    ("lone_contact_hits", "hits", "sweeps_on"), [(0, 1, False), (1, 1, True), (1, 2, False)]
+)
+def test_a_lone_detection_from_the_sweep_resumes_the_sweep(
+    lone_contact_hits: int, hits: int, sweeps_on: bool
+) -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.05)
+    planning = PlanningConfig(
+        lost_after_s=10.0,
+        cast_width_m=10.0,
+        cast_legs=2,
+        lone_contact_hits=lone_contact_hits,
+        lone_contact_lost_after_s=4.0,
+    )
+    mission = Mission(AREA, mapper, planning, NEVER)
+    flow = (1.0, 0.0)
+    v = VehicleState(90.0, -40.0)
+    swept = mission.step(Observation(0.0, v.x, v.y, *flow, False), v).waypoints
+    assert swept is not None  # the first sweep leg, North across the flow
+    v = VehicleState(90.0, -20.0)  # part way along it
+    for k in range(hits):
+        out = mission.step(Observation(5.0 + k, v.x, v.y, *flow, True), v)
+        assert out.state is MissionState.TRACE
+    last = 5.0 + hits - 1
+    wait = 4.0 if sweeps_on else 10.0  # a lone contact waits lone_contact_lost_after_s
+    assert mission.step(Observation(last + wait - 0.5, v.x, v.y, *flow, False), v).state is MissionState.TRACE
+    out = mission.step(Observation(last + wait, v.x, v.y, *flow, False), v)
+    assert PlumeLost(last + wait, v.x, v.y, last) in out.events
+    if sweeps_on:  # back to the sweep, on to the turning point it was flying to
+        assert out.state is MissionState.FIND
+        assert out.waypoints == swept
+        # a later contact is traced as before (and is not the mission's first)
+        out = mission.step(Observation(30.0, v.x, v.y, *flow, True), v)
+        assert out.state is MissionState.TRACE
+        assert out.events == (PlumeFound(30.0, v.x, v.y, first=False),)
+    else:  # a cast across the flow through the last detection
+        assert out.state is MissionState.LOST
+        assert out.waypoints == (Waypoint(90.0, -10.0),)
+
+
+def test_a_start_near_the_upflow_edge_sweeps_downflow_first() -> None:
+    def first_leg(start_x: float, near_edge: bool, spacings: float = 1.0) -> Waypoint:
+        planning = PlanningConfig(
+            zigzag_spacing_m=30.0,
+            zigzag_diagonal_start=True,
+            zigzag_downflow_near_edge=near_edge,
+            zigzag_near_edge_spacings=spacings,
+        )
+        mission = Mission(AREA, ScriptedMapper(AREA), planning, NEVER)
+        v = VehicleState(start_x, 10.0)
+        out = mission.step(Observation(0.0, v.x, v.y, 1.0, 0.0, False), v)  # flow East
+        assert out.waypoints is not None
+        return out.waypoints[0]
+
+    # 15 m from the upflow (West) edge: a spacing downflow with the rule, to the edge without it
+    assert first_leg(17.5, True).x == pytest.approx(47.5)
+    assert first_leg(17.5, False).x == pytest.approx(AREA.x_centres[0])
+    # a spacing or more from the edge, the sweep goes upflow either way
+    assert first_leg(47.5, True) == first_leg(47.5, False)
+    assert first_leg(47.5, True).x == pytest.approx(17.5)
+    # "near" can be set in spacings: 37.5 m from the edge is within 1.5 (45 m), not within 1.25
+    assert first_leg(40.0, True, 1.5).x == pytest.approx(70.0)
+    assert first_leg(40.0, True, 1.25).x == pytest.approx(10.0)
+    assert first_leg(40.0, False, 1.5) == first_leg(40.0, True, 1.25)
+
+
+def test_the_first_sweep_leads_upflow_for_a_young_plume() -> None:
+    planning = PlanningConfig(zigzag_spacing_m=30.0, zigzag_diagonal_start=True, zigzag_young_plume_s=40.0)
+    start = VehicleState(AREA.x_centres[0] + 80.0, -40.0)  # 80 m downflow of the upflow edge
+
+    def first_waypoint(mission: Mission, t: float, flow_x: float) -> Waypoint:
+        out = mission.step(Observation(t, start.x, start.y, flow_x, 0.0, False), start)
+        assert out.waypoints is not None
+        return out.waypoints[0]
+
+    # (80 - 1 m/s x 40 s) / 2 = 20 m straight upflow, then the zigzag
+    led = first_waypoint(Mission(AREA, ScriptedMapper(AREA), planning, NEVER), 0.0, 1.0)
+    assert (led.x, led.y) == (pytest.approx(start.x - 20.0), pytest.approx(start.y))
+    # a flow twice as fast carries a 40 s old plume 80 m: no lead
+    fast = first_waypoint(Mission(AREA, ScriptedMapper(AREA), planning, NEVER), 0.0, 2.0)
+    plain = planning.model_copy(update={"zigzag_young_plume_s": 0.0})
+    assert fast == first_waypoint(Mission(AREA, ScriptedMapper(AREA), plain, NEVER), 0.0, 2.0)
+    assert fast.x == pytest.approx(start.x - 30.0)
+    # a restored mission does not know how old the plume is: no lead
+    mission = Mission(AREA, ScriptedMapper(AREA), planning, NEVER)
+    first_waypoint(mission, 0.0, 1.0)
+    restored = Mission(AREA, ScriptedMapper(AREA), planning, NEVER)
+    restored.restore_state(mission.save_state())
+    assert first_waypoint(restored, 1.0, 1.0).x == pytest.approx(start.x - 30.0)
+
+
+def test_probes_beyond_an_obstacle_that_blocks_every_upflow_neighbour() -> None:
+    # the estimate is the vehicle's own cell, against the downflow face of a wall: the mission
+    # flies round the wall to the first free cell upflow instead of holding at the face
+    grid = Grid(0.0, 100.0, -50.0, 50.0, columns=20, rows=20, obstacles=((40.0, -10.0, 50.0, 10.0),))
+    here = grid.cell_of(52.5, 2.5)
+    beyond = grid.cell_of(37.5, 2.5)
+    assert grid.obstacle_mask.flat[grid.cell_of(47.5, 2.5)]
+    mapper = ScriptedMapper(grid)
+    mapper.peak_at(here)
+    mission = Mission(grid, mapper, PlanningConfig(), NEVER)
+    vehicle = Vehicle(*grid.centre(here))
+    visited = set()
+    for t in range(30):
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, True), vehicle.state)
+        if out.waypoints is not None:
+            for w in out.waypoints:
+                assert_safe_waypoint(grid, w)
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        visited.add(grid.cell_of(vehicle.x, vehicle.y))
+    assert beyond in visited
+
+
+def test_a_cast_turning_point_in_a_blocked_cell_does_not_stall_the_cast() -> None:
+    # the wang scenarios' obstacle ends at x = 56.25, a cell centre: a turning point just past it
+    # lies in a blocked cell; the cast goes on to the stand-in cell instead of holding
+    grid = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25, obstacles=((36.25, 0.25, 56.25, 7.75),))
+    mapper = ScriptedMapper(grid)
+    mapper.peak_at(grid.cell_of(90.0, 40.0))
+    planning = PlanningConfig(lost_after_s=2.0, cast_width_m=10.0, cast_legs=4)
+    mission = Mission(grid, mapper, planning, NEVER)
+    vehicle = Vehicle(56.4, 10.5)
+    positions = []
+    for t in range(40):
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, t == 0), vehicle.state)
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        positions.append((round(vehicle.x, 3), round(vehicle.y, 3)))
+    assert mission.state in (MissionState.LOST, MissionState.TRACE)
+    assert len(set(positions[-10:])) > 1  # still moving
+
+
+def start_check() -> tuple[ScriptedMapper, Mission, Vehicle, MissionOutput]:
+    """A map sure of SOURCE, a mission with a 6 m check 3 m upflow, and the first tick: odour at
+    the estimate's centre, where the vehicle is (the rule fires there)."""
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.9)
+    mission = mission_with(
+        mapper, rules=[DeclarationRule.MASS], probability=0.8, check_width_m=6.0, check_upflow_m=3.0
+    )
+    sx, sy = AREA.centre(SOURCE)
+    vehicle = Vehicle(sx, sy)
+    out = mission.step(Observation(0.0, sx, sy, 1.0, 0.0, True), vehicle.state)
+    return mapper, mission, vehicle, out
+
+
+def fly_dry_until_declared(
+    mission: Mission, vehicle: Vehicle, out: MissionOutput, times: range
+) -> tuple[MissionOutput, list[tuple[float, float]]]:
+    """Fly the waypoints one per tick with no odour until a declaration (or ``times`` run out);
+    returns the last output and the points visited."""
+    visited = []
+    for t in times:
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        visited.append((vehicle.x, vehicle.y))
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, False), vehicle.state)
+        if out.state is MissionState.DECLARED:
+            break
+    return out, visited
+
+
+def test_the_upflow_check_crosses_the_flow_upflow_of_the_estimate_before_declaring() -> None:
+    _, mission, vehicle, out = start_check()
+    sx, sy = AREA.centre(SOURCE)
+    assert out.state is MissionState.TRACE  # the rule fires, but the check comes first
+    assert out.waypoints is not None
+    out, visited = fly_dry_until_declared(mission, vehicle, out, range(1, 10))
+    assert out.state is MissionState.DECLARED
+    # flow East: 3 m West of the centre, 6 m to one side, then the other; declared there
+    assert visited == [(sx - 3.0, sy + 6.0), (sx - 3.0, sy - 6.0), (sx - 3.0, sy - 6.0)]
+    (declared,) = out.events
+    assert isinstance(declared, SourceDeclared)
+    assert (declared.x, declared.y) == (sx, sy)
+    assert declared.check is CrossCheck.FLOWN
+
+
+def test_odour_upflow_of_the_estimate_calls_the_check_off() -> None:
+    _, mission, vehicle, out = start_check()
+    sx, sy = AREA.centre(SOURCE)
+    vehicle.follow(out.waypoints)
+    vehicle.move()  # on the check's first turning point, 3 m upflow
+    assert (vehicle.x, vehicle.y) == (sx - 3.0, sy + 6.0)
+    out = mission.step(Observation(1.0, vehicle.x, vehicle.y, 1.0, 0.0, True), vehicle.state)
+    # odour 3 m upflow: not declared; the rule fires again at once (the scripted map does not
+    # move), so a new check starts from here, and it must be flown whole before a declaration
+    assert out.state is MissionState.TRACE
+    assert out.events == ()
+    out, visited = fly_dry_until_declared(mission, vehicle, out, range(2, 12))
+    assert out.state is MissionState.DECLARED
+    assert visited[-2:] == [(sx - 3.0, sy - 6.0)] * 2  # the far side of the new check, then declared
+
+
+def test_odour_at_the_estimate_does_not_call_the_check_off() -> None:
+    _, mission, vehicle, out = start_check()
+    sx, sy = AREA.centre(SOURCE)
+    first_leg = out.waypoints
+    # odour 1 m downflow of the centre is what a source there gives: the check goes on
+    out = mission.step(Observation(1.0, sx + 1.0, sy, 1.0, 0.0, True), vehicle.state)
+    assert out.state is MissionState.TRACE
+    assert out.waypoints is None or out.waypoints == first_leg
+
+
+def test_a_new_estimate_calls_the_check_off() -> None:
+    mapper, mission, vehicle, out = start_check()
+    sx, sy = AREA.centre(SOURCE)
+    vehicle.follow(out.waypoints)
+    vehicle.move()
+    other = AREA.cell_of(sx - 20.0, sy)
+    mapper.peak_at(other, 0.9)  # the map now names a cell 20 m upflow
+    for t in range(1, 4):
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, False), vehicle.state)
+        assert out.state is MissionState.TRACE
+        assert out.events == ()
+    # on its way to the new estimate, not on the old check's legs
+    assert vehicle.x < sx - 3.0
+
+
+@pytest.mark.parametrize("probe_to_pass", [False, True])
+def test_the_probe_upflow_can_fly_until_the_upflow_pass_is_made(probe_to_pass: bool) -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.5)
+    decl = DeclarationConfig(
+        rules=[DeclarationRule.STABLE], stable_s=1e9, upflow_pass_m=2.0, probe_to_pass=probe_to_pass
+    )
+    mission = Mission(AREA, mapper, PlanningConfig(), decl)
+    cx, cy = AREA.centre(SOURCE)  # (22.5, 2.5) on 5 m cells; flow East, so upflow is West
+    flow = (1.0, 0.0)
+    v = VehicleState(cx, cy)
+    out = mission.step(Observation(0.0, v.x, v.y, *flow, True), v)  # at the estimate, in odour
+    assert out.waypoints is not None
+    point = Waypoint(cx - 2.25, cy)  # just beyond the 2 m pass
+    if not probe_to_pass:  # the cell upflow: its centre, 5 m upflow
+        assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)
+        return
+    assert out.waypoints == (point,)
+    v = VehicleState(cx - 1.5, cy)  # on the way, still in the estimated cell: keep going
+    out = mission.step(Observation(1.0, v.x, v.y, *flow, False), v)
+    assert out.waypoints is None
+    assert out.state is MissionState.TRACE
+    v = VehicleState(cx - 2.25, cy)  # there: the pass is made, so the cell probe takes over
+    out = mission.step(Observation(2.0, v.x, v.y, *flow, False), v)
+    assert out.waypoints is not None
+    assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)
+
+
+def steady_mission(hits: list[bool], turn: float = 0.0) -> MissionOutput:
+    """A mission with the check and the steady-odour test: the vehicle held at SOURCE's centre with
+    odour in the ticks ``hits`` says while the map is flat, then one more tick with odour in which
+    the map becomes sure of SOURCE; that tick's output. The flow is (1, -turn) m/s until the last
+    40 ticks and (1, turn) in them (East with ``turn`` 0)."""
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.05)
+    mission = mission_with(
+        mapper, rules=[DeclarationRule.MASS], probability=0.8, check_width_m=6.0, steady_hit_rate=0.75
+    )
+    sx, sy = AREA.centre(SOURCE)
+    vehicle = VehicleState(sx, sy)
+    n = len(hits)
+    for t, hit in enumerate(hits):
+        fy = turn if t > n - 40 else -turn
+        out = mission.step(Observation(float(t), sx, sy, 1.0, fy, hit), vehicle)
+        assert out.state is MissionState.TRACE
+    mapper.peak_at(SOURCE, 0.9)
+    return mission.step(Observation(float(n), sx, sy, 1.0, turn, True), vehicle)
+
+
+def test_steady_odour_at_the_estimate_is_declared_without_the_check() -> None:
+    out = steady_mission([t % 5 != 4 for t in range(50)])  # odour in 4 ticks of 5, for 50 s
+    assert out.state is MissionState.DECLARED
+    (declared,) = out.events
+    assert isinstance(declared, SourceDeclared)
+    assert (declared.x, declared.y) == AREA.centre(SOURCE)
+    assert declared.check is CrossCheck.STEADY
+
+
+@pytest.mark.parametrize(
+    ("hits", "turn"),
+    [
+        ([t % 2 == 0 for t in range(50)], 0.0),  # odour in half the ticks: a plume swung over it
+        ([t % 5 != 4 for t in range(30)], 0.0),  # odour first met only 30 s ago
+        # the flow of the last 40 s has turned 53 degrees from before: its mean over the 50 s
+        # window lies 9 degrees from it (a plume being swung aside smells steady for a while)
+        ([t % 5 != 4 for t in range(50)], 0.5),
+    ],
+)
+def test_odour_that_is_not_steady_is_checked_first(hits: list[bool], turn: float) -> None:
+    out = steady_mission(hits, turn)
+    assert out.state is MissionState.TRACE
+    assert out.events == ()
+    assert out.waypoints is not None  # to the check's first turning point: 3 m upflow, 6 m aside
+    sx, sy = AREA.centre(SOURCE)
+    assert math.hypot(out.waypoints[0].x - sx, out.waypoints[0].y - sy) == pytest.approx(math.hypot(3.0, 6.0))

@@ -1,0 +1,101 @@
+"""``oslim bench suite``: every class with one configuration, its JSON contract, Dask back end."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from service.cli import main
+from service.tools.bench import suite
+from service.tools.bench.search import FailureClass, MissionResult
+
+CLASS_KEYS = (
+    "class",
+    "runs",
+    "success_rate",
+    "wrong_declarations",
+    "median_time_s",
+    "p90_time_s",
+    "max_time_s",
+)
+SUMMARY_KEYS = ("classes", "missions", "worst_class", "worst_success_rate", "wrong_rate", "missions_per_s")
+
+
+def _rows(capsys: pytest.CaptureFixture[str]) -> list[dict[str, object]]:
+    return [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+
+
+def test_json_gives_a_row_per_class_then_the_summary(capsys: pytest.CaptureFixture[str]) -> None:
+    """A quick run of every class (two missions each): the command works on the whole suite."""
+    assert main(["bench", "suite", "--runs", "2", "--jobs", "2", "--json"]) == 0
+    rows = _rows(capsys)
+    classes, summary = rows[:-1], rows[-1]
+    assert [row["class"] for row in classes] == [path.stem for path in suite.suite_classes()]
+    for row in classes:
+        assert all(key in row for key in CLASS_KEYS)
+        assert row["runs"] == 2
+        assert sum(row["failures"].values()) == round(2 * (1 - row["success_rate"]))  # type: ignore[union-attr]
+    assert summary["summary"] is True
+    assert all(key in summary for key in SUMMARY_KEYS)
+    assert summary["missions"] == 2 * len(classes)
+    worst = min(classes, key=lambda row: row["success_rate"])  # type: ignore[arg-type,return-value]
+    assert summary["worst_success_rate"] == worst["success_rate"]
+    wrong = sum(row["wrong_declarations"] for row in classes)  # type: ignore[misc]
+    assert summary["wrong_rate"] == pytest.approx(wrong / summary["missions"])  # type: ignore[operator]
+
+
+def test_text_output_names_the_worst_class(capsys: pytest.CaptureFixture[str]) -> None:
+    assert (
+        main(["bench", "suite", "--class", "steady", "--class", "patchy", "--runs", "1", "--jobs", "1"]) == 0
+    )
+    out = capsys.readouterr().out
+    assert "never smelled / not reached / undeclared / wrong" in out
+    assert "summary: worst class" in out
+    assert "missions/s" in out
+
+
+def test_an_unknown_class_or_key_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit, match="unknown class 'nope'"):
+        main(["bench", "suite", "--class", "nope"])
+    assert main(["bench", "suite", "--class", "steady", "--runs", "1", "--set", "mapping.bogus=1"]) == 2
+    assert "mapping.bogus: unknown key" in capsys.readouterr().err
+
+
+def test_summaries_count_failures_per_class() -> None:
+    def result(seed: int, correct: bool, declared: bool, detected: bool) -> MissionResult:
+        return MissionResult(seed, 0.0, 0.0, declared, correct, 50.0 + seed, None, None, None, 10.0,
+                             5.0 if detected else None)  # fmt: skip
+
+    outcomes = [(result(0, True, True, True), 300.0), (result(1, False, True, True), 250.0),
+                (result(2, False, False, False), 300.0), (result(3, True, True, True), 300.0)]  # fmt: skip
+    summary = suite.summarise_class("x", outcomes)
+    assert summary.success_rate == 0.5
+    assert summary.wrong_declarations == 1
+    assert summary.median_time_s == pytest.approx(51.5)
+    assert summary.max_time_s == 300.0
+    assert summary.failures[FailureClass.WRONG] == 1
+    assert summary.failures[FailureClass.NEVER_DETECTED] == 1
+    total = suite.summarise_suite([summary, suite.summarise_class("y", outcomes[:1])], elapsed_s=2.0)
+    assert total.worst_class == "x"
+    assert total.missions == 5
+    assert total.wrong_rate == pytest.approx(1 / 5)
+    assert total.missions_per_s == pytest.approx(2.5)
+
+
+def test_dask_gives_the_same_results_as_the_process_pool() -> None:
+    distributed = pytest.importorskip("distributed")
+    files = [path for path in suite.suite_classes() if path.stem in ("steady", "switching")]
+    local = list(suite.run_suite(files, 2, first_seed=7, jobs=2))
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp",
+                                  host="127.0.0.1", dashboard_address=None) as cluster:  # fmt: skip
+        remote = list(suite.run_suite(files, 2, first_seed=7, scheduler=cluster.scheduler_address))
+    assert remote == local
+
+
+def test_a_suite_directory_without_classes_is_refused(tmp_path: Path) -> None:
+    from service.core.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="no world classes"):
+        suite.suite_classes(tmp_path)

@@ -1,0 +1,52 @@
+"""``oslim sim``: a whole mission over loopback MAVLink and Zenoh."""
+
+import asyncio
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from service.tools.sim import run_mission
+from sim_bridge.scenarios import load_scenario
+
+pytestmark = pytest.mark.sim
+
+
+def test_declares_the_wang_laminar_source(tmp_path: Path) -> None:
+    scenario = load_scenario("wang-laminar")
+    result, stats, perf = asyncio.run(
+        run_mission(scenario, 1, speed=10.0, max_time_s=600.0, recorder_dir=str(tmp_path), probe=False)
+    )
+    assert result.found, result
+    assert result.error_m is not None
+    assert result.error_m <= 4.0
+    assert stats.unsafe_targets == 0
+    assert perf["setpoints"] > 0
+
+
+def test_cli_prints_one_json_line_and_exit_status(tmp_path: Path) -> None:
+    proc = subprocess.run(
+        [sys.executable, "-m", "service.cli", "sim", "--scenario", "wang-laminar", "--seed", "1",
+         "--speed", "20", "--recorder-dir", str(tmp_path), "--report", str(tmp_path / "run.png")],
+        capture_output=True, text=True, timeout=240, check=False,
+    )  # fmt: skip
+    last = proc.stdout.strip().splitlines()[-1]
+    result = json.loads(last)
+    keys = {
+        "found",
+        "declared_x",
+        "declared_y",
+        "source_x",
+        "source_y",
+        "error_m",
+        "time_s",
+        "path_m",
+        "mcap",
+    }
+    assert set(result) == keys
+    assert proc.returncode == (0 if result["found"] else 1)
+    assert "performance:" in proc.stderr
+    assert Path(result["mcap"]).exists()
+    assert (tmp_path / "run.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # --report drew the run
