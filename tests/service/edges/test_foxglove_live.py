@@ -4,10 +4,10 @@ subscribes and decodes what the service publishes, with Foxglove's own protobuf 
 import asyncio
 import json
 import socket
-import time
 import struct
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
