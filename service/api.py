@@ -56,12 +56,13 @@ HEADING_MIN_MOVE_M = 0.05
 class Declaration:
     """The declared source.
 
-    ``x``, ``y``: the centre of the declared cell (map frame, m). ``confidence``: the source
-    likelihood map's probability of that cell when it was declared (the mapper's estimate
-    probability, 0..1; the declaration rules of ``[declaration]`` decided, this is how peaked the
-    map was). ``radius_m``: half the diagonal of a cell, the distance from the declared point
-    within which the source lies if the declared cell is the source's cell. ``cell``: the papers'
-    1-based cell number; ``time_s``: when it was declared.
+    ``x``, ``y``: the centre of the declared cell (map frame, m). The statement is "the source
+    lies within ``radius_m`` of (x, y) with probability ``confidence``": ``confidence`` is the
+    source likelihood map's mass over the cells whose centres lie within
+    ``declaration.radius_m`` of the declared cell's (what the mass rule weighs), and ``radius_m``
+    is that radius plus half a cell's diagonal, so that every point of those cells is inside it.
+    ``oslim bench suite`` measures how often the statement is true. ``cell``: the papers' 1-based
+    cell number; ``time_s``: when it was declared.
     """
 
     time_s: float
@@ -238,8 +239,10 @@ class Search:
         return self._mission
 
     def _declaration(self, event: SourceDeclared) -> Declaration:
-        radius_m = 0.5 * math.hypot(self.grid.cell_width_m, self.grid.cell_height_m)
-        return Declaration(event.time_s, event.x, event.y, event.probability, radius_m, event.cell)
+        radius_m = self.config.declaration.radius_m + 0.5 * math.hypot(
+            self.grid.cell_width_m, self.grid.cell_height_m
+        )
+        return Declaration(event.time_s, event.x, event.y, event.mass, radius_m, event.cell)
 
 
 def _check_finite(what: str, *values: float) -> None:

@@ -107,7 +107,15 @@ class MissionResult:
     """When the vehicle first stood within one cell of the source's cell; None if it never did."""
     estimate_on_source: bool = False
     """Whether the map's estimate at the end was within one cell of the source's cell."""
+    confidence: float | None = None
+    """The declaration's stated probability that the source lies within ``radius_m`` of it."""
+    radius_m: float | None = None
     trace: MissionTrace | None = field(default=None, compare=False)
+
+    @property
+    def within_stated_radius(self) -> bool:
+        """Whether a declaration's statement came true (the source within its stated radius)."""
+        return self.error_m is not None and self.radius_m is not None and self.error_m <= self.radius_m
 
     @property
     def wrong(self) -> bool:
@@ -263,6 +271,8 @@ def run_mission(
         first_detection_s=first_detection,
         reached_s=reached,
         estimate_on_source=on_source,
+        confidence=declaration.confidence,
+        radius_m=declaration.radius_m,
         trace=trace,
     )
 

@@ -94,6 +94,7 @@ class ClassSummary:
     """The longest time limit among the class's worlds (it scales with area and speed)."""
     median_path_m: float
     failures: dict[FailureClass, int] = field(default_factory=dict)
+    calibration: Calibration = field(default_factory=lambda: Calibration(0, 0, 0.0, 0, 0))
 
     def line(self) -> str:
         """The class's row of the text table (columns of ``HEADER``)."""
@@ -117,7 +118,59 @@ class ClassSummary:
             "max_time_s": self.max_time_s,
             "median_path_m": self.median_path_m,
             "failures": {str(kind): self.failures.get(kind, 0) for kind in FailureClass},
+            "declarations": self.calibration.declarations,
+            "within_stated_radius": self.calibration.within,
         }
+
+
+CALIBRATION_LEVEL = 0.95
+"""The stated confidence the suite's calibration figure is about (the issue's "stated 95 %")."""
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """How often declarations were right about themselves: the source within the stated radius."""
+
+    declarations: int
+    within: int
+    """Declarations whose source lay within the radius they stated."""
+    confidence_sum: float
+    high: int
+    """Declarations stated at ``CALIBRATION_LEVEL`` or more ..."""
+    high_within: int
+    """... and of them, those whose source lay within the stated radius."""
+
+    @classmethod
+    def of(cls, results: Sequence[MissionResult]) -> Calibration:
+        declared = [r for r in results if r.declared and r.confidence is not None]
+        high = [r for r in declared if r.confidence is not None and r.confidence >= CALIBRATION_LEVEL]
+        return cls(
+            declarations=len(declared),
+            within=sum(r.within_stated_radius for r in declared),
+            confidence_sum=sum(r.confidence or 0.0 for r in declared),
+            high=len(high),
+            high_within=sum(r.within_stated_radius for r in high),
+        )
+
+    def __add__(self, other: Calibration) -> Calibration:
+        return Calibration(
+            self.declarations + other.declarations,
+            self.within + other.within,
+            self.confidence_sum + other.confidence_sum,
+            self.high + other.high,
+            self.high_within + other.high_within,
+        )
+
+    def line(self) -> str:
+        if not self.declarations:
+            return "calibration: no declarations"
+        high = f"{self.high_within / self.high:.1%}" if self.high else "-"
+        stated, true = self.confidence_sum / self.declarations, self.within / self.declarations
+        return (
+            f"calibration: {self.high} declarations stated at >= {CALIBRATION_LEVEL:.0%}: {high} had the "
+            f"source within their stated radius; all {self.declarations}: stated {stated:.1%} on average, "
+            f"true {true:.1%}"
+        )
 
 
 def summarise_class(name: str, outcomes: Sequence[tuple[MissionResult, float]]) -> ClassSummary:
@@ -136,6 +189,7 @@ def summarise_class(name: str, outcomes: Sequence[tuple[MissionResult, float]]) 
         max_time_s=max(limit for _, limit in outcomes),
         median_path_m=float(np.median([r.path_m for r in results])),
         failures={kind: failures.count(kind) for kind in FailureClass},
+        calibration=Calibration.of(results),
     )
 
 
@@ -149,12 +203,17 @@ class SuiteSummary:
     """Wrong declarations per mission, over the whole suite."""
     missions_per_s: float
     elapsed_s: float
+    calibration: Calibration = field(default_factory=lambda: Calibration(0, 0, 0.0, 0, 0))
 
     def line(self) -> str:
         return (
-            f"summary: worst class {self.worst_class} {self.worst_success_rate:.1%}; wrong declarations "
-            f"{self.wrong_rate:.2%} of {self.missions} missions; {self.missions_per_s:.2f} missions/s "
-            f"({self.elapsed_s:.0f} s)"
+            self.calibration.line()
+            + "\n"
+            + (
+                f"summary: worst class {self.worst_class} {self.worst_success_rate:.1%}; wrong declarations "
+                f"{self.wrong_rate:.2%} of {self.missions} missions; {self.missions_per_s:.2f} missions/s "
+                f"({self.elapsed_s:.0f} s)"
+            )
         )
 
     def as_row(self) -> dict[str, Any]:
@@ -162,6 +221,12 @@ class SuiteSummary:
         row: dict[str, Any] = {"summary": True}
         row.update({key: getattr(self, key) for key in SUMMARY_KEYS})
         row["elapsed_s"] = self.elapsed_s
+        c = self.calibration
+        row["declarations"] = c.declarations
+        row["stated_confidence_mean"] = c.confidence_sum / c.declarations if c.declarations else None
+        row["within_stated_radius_rate"] = c.within / c.declarations if c.declarations else None
+        row["declarations_at_95"] = c.high
+        row["within_stated_radius_rate_at_95"] = c.high_within / c.high if c.high else None
         return row
 
 
@@ -176,6 +241,7 @@ def summarise_suite(classes: Sequence[ClassSummary], elapsed_s: float) -> SuiteS
         wrong_rate=sum(c.wrong_declarations for c in classes) / missions,
         missions_per_s=missions / elapsed_s if elapsed_s > 0 else math.inf,
         elapsed_s=elapsed_s,
+        calibration=sum((c.calibration for c in classes), Calibration(0, 0, 0.0, 0, 0)),
     )
 
 

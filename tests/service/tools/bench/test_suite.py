@@ -99,3 +99,18 @@ def test_a_suite_directory_without_classes_is_refused(tmp_path: Path) -> None:
 
     with pytest.raises(ConfigError, match="no world classes"):
         suite.suite_classes(tmp_path)
+
+
+def test_calibration_counts_the_statements_that_came_true() -> None:
+    def declared(error_m: float, confidence: float) -> MissionResult:
+        return MissionResult(0, 0.0, 0.0, True, error_m < 7.0, 10.0, error_m, 0.0, error_m, 10.0, 1.0,
+                             confidence=confidence, radius_m=5.0)  # fmt: skip
+
+    results = [declared(1.0, 0.97), declared(6.0, 0.99), declared(2.0, 0.5), declared(30.0, 0.96)]
+    calibration = suite.Calibration.of(results)
+    assert (calibration.declarations, calibration.within) == (4, 2)
+    assert (calibration.high, calibration.high_within) == (3, 1)
+    assert calibration.confidence_sum == pytest.approx(0.97 + 0.99 + 0.5 + 0.96)
+    both = calibration + calibration
+    assert (both.high, both.high_within) == (6, 2)
+    assert "3 declarations stated at >= 95%: 33.3% had the source within" in calibration.line()
