@@ -108,10 +108,10 @@ class MappingConfig(_Section):
     window: int = Field(default=50, gt=0, le=10_000)
     sigma_x: float = Field(default=0.2, gt=0)
     sigma_y: float = Field(default=0.2, gt=0)
-    drift_spread: float = Field(default=0.0, ge=0)
-    forgetting: float = Field(default=0.0, ge=0, lt=1)
+    drift_spread: float = Field(default=0.3, ge=0)
+    forgetting: float = Field(default=0.003, ge=0, lt=1)
     zero_lag: bool = True
-    prehistory: bool = False
+    prehistory: bool = True
     epsilon_d: float = Field(default=0.2, gt=0, lt=1)
     epsilon_c: float = Field(default=0.02, gt=0, lt=1)
     tick_s: float = Field(default=1.0, gt=0, le=60)
@@ -136,13 +136,13 @@ class PlanningConfig(_Section):
     apf_step_m: float = Field(default=2.0, gt=0)
     apf_obstacle_gain: float = Field(default=1.0, ge=0)
     apf_obstacle_range_m: float = Field(default=5.0, gt=0)
-    zigzag_spacing_m: float = Field(default=10.0, gt=0)
+    zigzag_spacing_m: float = Field(default=30.0, gt=0)
     zigzag_diagonal_start: bool = False
     """The first zigzag leg advances a spacing along the flow instead of crossing at the start's line."""
-    zigzag_downflow_near_edge: bool = False
+    zigzag_downflow_near_edge: bool = True
     """A start less than ``zigzag_near_edge_spacings`` zigzag spacings from the upflow edge sweeps
     downflow first."""
-    zigzag_near_edge_spacings: float = Field(default=1.0, gt=0, le=10)
+    zigzag_near_edge_spacings: float = Field(default=1.5, gt=0, le=10)
     """How near the upflow edge, in zigzag spacings, ``zigzag_downflow_near_edge`` applies."""
     zigzag_young_plume_s: float = Field(default=0.0, ge=0, le=3600)
     """For a plume released since the mission began: the mission's first upflow sweep first runs
@@ -150,19 +150,19 @@ class PlanningConfig(_Section):
     with this as the time from the leg's start to the plume); 0: off, for a source long released."""
     cast_width_m: float = Field(default=10.0, gt=0)
     cast_legs: int = Field(default=4, ge=0, le=100)
-    lost_trace_mass: float = Field(default=0.0, ge=0, le=1)
+    lost_trace_mass: float = Field(default=0.2, ge=0, le=1)
     """Plume lost with this share of the map within ``declaration.radius_m`` of the estimate: go
     on tracing toward the estimate instead of casting (0: always cast; surge-cast always casts)."""
-    lost_after_s: float = Field(default=20.0, gt=0)
-    flat_map_ratio: float = Field(default=0.0, ge=0)
+    lost_after_s: float = Field(default=30.0, gt=0)
+    flat_map_ratio: float = Field(default=2.0, ge=0)
     """A map whose most likely cell holds less than this many times a uniform map's share has no
     evidence left of where the source is: a cast that ends with such a map sweeps again instead of
     heading for the map's estimate, an arbitrary cell (0: off; surge-cast never sweeps again)."""
-    lone_contact_hits: int = Field(default=0, ge=0, le=1000)
+    lone_contact_hits: int = Field(default=1, ge=0, le=1000)
     """A contact the sweep met with at most this many detections, then lost for
     ``lone_contact_lost_after_s``, goes back to the sweep where it stopped instead of casting
     (0: always cast)."""
-    lone_contact_lost_after_s: float = Field(default=20.0, gt=0)
+    lone_contact_lost_after_s: float = Field(default=5.0, gt=0)
     """How long a lone contact (``lone_contact_hits``) waits for another detection, s."""
     surge_step_m: float = Field(default=5.0, gt=0)
 
@@ -188,24 +188,24 @@ class DeclarationConfig(_Section):
     visit_radius_m: float = Field(default=3.0, gt=0)
     confirm_s: float = Field(default=0.0, ge=0)
     """A rule must keep firing for the same cell, the vehicle near it, this long, s (0: at once)."""
-    upflow_pass_m: float = Field(default=0.0, ge=0)
+    upflow_pass_m: float = Field(default=2.0, ge=0)
     """No rule fires for a cell until the vehicle has been at least this far upflow of its centre
     (along the mean flow, within ``visit_radius_m`` across it) since it became the estimate, m
     (0: off). Bayesian mappers only: the hmm's estimate mostly sits in the vehicle's own cell and
     moves with it, so it is seldom passed (farrell2003, hmm + astar, 100 runs: 45 % -> 32 %)."""
-    check_width_m: float = Field(default=0.0, ge=0)
+    check_width_m: float = Field(default=8.0, ge=0)
     """Before naming a cell, cross the flow ``check_upflow_m`` upflow of its centre, this far to
     either side, m (0: off); odour found upflow there calls the declaration off."""
-    persist_s: float = Field(default=0.0, ge=0)
+    persist_s: float = Field(default=20.0, ge=0)
     """No rule fires until odour has been detected within ``visit_radius_m`` of the estimate at
     two times at least this far apart, s (0: off). Bayesian mappers only, like the upflow pass it
     guards (farrell2003, hmm + astar, 200 runs: 64 % -> 53.5 %)."""
-    probe_to_pass: bool = False
+    probe_to_pass: bool = True
     """The probe upflow of the estimate is flown until the vehicle is ``upflow_pass_m`` upflow of
     its centre, not only until it enters the cell upflow."""
     check_upflow_m: float = Field(default=3.0, gt=0)
     """How far upflow of the estimated cell's centre the check crosses the flow, m."""
-    steady_hit_rate: float = Field(default=0.0, ge=0, le=1)
+    steady_hit_rate: float = Field(default=0.75, ge=0, le=1)
     """Skip the check when odour was detected in at least this share of the ticks the vehicle
     spent near the estimate (``steady_radius_m``, over the last ``steady_window_s``), with the
     other ``steady_*`` conditions met (0: off; ``planning.declaration.steady_odour``)."""

@@ -55,7 +55,27 @@ class ScriptedMapper(SourceMapper):
         return out
 
 
-NEVER = DeclarationConfig(rules=[DeclarationRule.STABLE], stable_s=1e9)
+PAPERS_PLANNING = PlanningConfig(
+    zigzag_spacing_m=10.0,
+    zigzag_downflow_near_edge=False,
+    zigzag_near_edge_spacings=1.0,
+    lost_trace_mass=0.0,
+    lost_after_s=20.0,
+    flat_map_ratio=0.0,
+    lone_contact_hits=0,
+    lone_contact_lost_after_s=20.0,
+)
+"""The planning these tests were written against: the papers' mechanisms without the later guards
+(no downflow-first sweep near the edge, tracing on while lost, sweeping again on a flat map or
+lone contacts); a test of one of those turns it on."""
+
+PAPERS_DECLARATION = DeclarationConfig(
+    upflow_pass_m=0.0, check_width_m=0.0, persist_s=0.0, probe_to_pass=False, steady_hit_rate=0.0
+)
+"""The declaration these tests were written against: the papers' rules without the later guards
+(no upflow pass, check across the flow, persistence or steady-odour test)."""
+
+NEVER = PAPERS_DECLARATION.model_copy(update={"rules": [DeclarationRule.STABLE], "stable_s": 1e9})
 """Declaration off, for tests of the other states."""
 
 # -- independent references ---------------------------------------------------------------------
@@ -207,7 +227,7 @@ def test_reaches_the_estimate_whenever_a_path_exists() -> None:
         goal = int(rng.integers(0, grid.size))
         mapper = ScriptedMapper(grid, seed=trial)
         mapper.peak_at(goal)
-        mission = Mission(grid, mapper, PlanningConfig(), NEVER)
+        mission = Mission(grid, mapper, PAPERS_PLANNING, NEVER)
         x, y = grid.centre(start[0] * grid.columns + start[1])
         vehicle = Vehicle(x, y)
         visited: set[int] = set()
@@ -247,8 +267,10 @@ SOURCE = AREA.cell_of(22.0, 3.0)
 
 
 def mission_with(mapper: SourceMapper, **declaration: object) -> Mission:
-    planning = PlanningConfig(lost_after_s=10.0, cast_width_m=10.0, cast_legs=2, zigzag_spacing_m=10.0)
-    decl = DeclarationConfig(**declaration)  # type: ignore[arg-type]
+    planning = PAPERS_PLANNING.model_copy(
+        update={"lost_after_s": 10.0, "cast_width_m": 10.0, "cast_legs": 2, "zigzag_spacing_m": 10.0}
+    )
+    decl = PAPERS_DECLARATION.model_copy(update=declaration)
     return Mission(AREA, mapper, planning, decl)
 
 
@@ -372,7 +394,7 @@ def test_unreachable_estimate_is_handled_without_error() -> None:
     assert not grid.obstacle_mask.flat[pocket]
     mapper = ScriptedMapper(grid)
     mapper.peak_at(pocket)
-    mission = Mission(grid, mapper, PlanningConfig(), NEVER)
+    mission = Mission(grid, mapper, PAPERS_PLANNING, NEVER)
     vehicle = Vehicle(5.0, -45.0)
     for t in range(60):
         out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 0.0, 1.0, t == 0), vehicle.state)
@@ -452,12 +474,14 @@ def test_a_lost_plume_is_traced_on_while_the_estimate_holds_the_map(
 ) -> None:
     mapper = ScriptedMapper(AREA)
     mapper.peak_at(SOURCE, peak)  # 5 m cells, radius 3 m: the mass near the estimate is the peak's
-    planning = PlanningConfig(
-        method=PlanningMethod(method),
-        lost_after_s=10.0,
-        cast_width_m=10.0,
-        cast_legs=2,
-        lost_trace_mass=lost_trace_mass,
+    planning = PAPERS_PLANNING.model_copy(
+        update={
+            "method": PlanningMethod(method),
+            "lost_after_s": 10.0,
+            "cast_width_m": 10.0,
+            "cast_legs": 2,
+            "lost_trace_mass": lost_trace_mass,
+        }
     )
     mission = Mission(AREA, mapper, planning, NEVER)
     v = VehicleState(90.0, -40.0)
@@ -632,7 +656,7 @@ def test_a_cast_turning_point_in_a_blocked_cell_does_not_stall_the_cast() -> Non
     grid = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25, obstacles=((36.25, 0.25, 56.25, 7.75),))
     mapper = ScriptedMapper(grid)
     mapper.peak_at(grid.cell_of(90.0, 40.0))
-    planning = PlanningConfig(lost_after_s=2.0, cast_width_m=10.0, cast_legs=4)
+    planning = PAPERS_PLANNING.model_copy(update={"lost_after_s": 2.0, "cast_width_m": 10.0, "cast_legs": 4})
     mission = Mission(grid, mapper, planning, NEVER)
     vehicle = Vehicle(56.4, 10.5)
     positions = []

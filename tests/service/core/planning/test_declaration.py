@@ -10,6 +10,13 @@ from service.core.planning.declaration import Declarer, mass_within, steady_odou
 
 G = Grid(0.0, 5.0, 0.0, 5.0, columns=5, rows=5)  # 1 m cells
 
+PAPERS_DECLARATION = DeclarationConfig(
+    upflow_pass_m=0.0, check_width_m=0.0, persist_s=0.0, probe_to_pass=False, steady_hit_rate=0.0
+)
+"""The declaration these tests were written against: the papers' rules without the later guards
+(no upflow pass, check across the flow, persistence or steady-odour test); each test turns on
+the one it is about."""
+
 
 def peaked(cell: int, peak: float = 0.3) -> np.ndarray:
     rest = (1.0 - peak) / (G.size - 1)
@@ -31,7 +38,7 @@ def test_mass_within_radius_by_hand() -> None:
 
 
 def test_stable_rule_fires_after_30_s_unchanged() -> None:
-    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.STABLE]))
+    d = Declarer(G, PAPERS_DECLARATION.model_copy(update={"rules": [DeclarationRule.STABLE]}))
     assert d.update(0.0, peaked(3)) is None  # not armed yet
     d.arm(100.0, peaked(3))
     for t in range(101, 130):
@@ -46,7 +53,9 @@ def test_stable_rule_fires_after_30_s_unchanged() -> None:
 
 
 def test_a_new_estimate_restarts_the_clock() -> None:
-    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.STABLE], stable_s=30.0))
+    d = Declarer(
+        G, PAPERS_DECLARATION.model_copy(update={"rules": [DeclarationRule.STABLE], "stable_s": 30.0})
+    )
     d.arm(0.0, peaked(3))
     assert d.update(10.0, peaked(7)) is None  # changed at t = 10
     assert d.update(39.0, peaked(7)) is None
@@ -56,7 +65,9 @@ def test_a_new_estimate_restarts_the_clock() -> None:
 
 
 def test_fractional_ticks_reach_the_mark() -> None:
-    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.STABLE], stable_s=3.0))
+    d = Declarer(
+        G, PAPERS_DECLARATION.model_copy(update={"rules": [DeclarationRule.STABLE], "stable_s": 3.0})
+    )
     d.arm(0.0, peaked(3))
     t, found = 0.0, None
     for _ in range(30):  # 0.1 s ticks summed in floating point: 2.9999999999999996
@@ -66,8 +77,8 @@ def test_fractional_ticks_reach_the_mark() -> None:
 
 
 def test_mass_rule_and_which_fired() -> None:
-    config = DeclarationConfig(
-        rules=[DeclarationRule.MASS, DeclarationRule.STABLE], probability=0.6, radius_m=1.0
+    config = PAPERS_DECLARATION.model_copy(
+        update={"rules": [DeclarationRule.MASS, DeclarationRule.STABLE], "probability": 0.6, "radius_m": 1.0}
     )
     d = Declarer(G, config)
     centre = G.cell_of(2.5, 2.5)
@@ -92,13 +103,20 @@ def test_mass_rule_and_which_fired() -> None:
 
 
 def test_mass_rule_alone_ignores_a_stable_but_flat_map() -> None:
-    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=1.0))
+    d = Declarer(
+        G,
+        PAPERS_DECLARATION.model_copy(
+            update={"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 1.0}
+        ),
+    )
     d.arm(0.0, peaked(12, 0.1))
     assert all(d.update(float(t), peaked(12, 0.1)) is None for t in range(1, 100))
 
 
 def test_confirm_waits_for_the_rule_to_keep_firing() -> None:
-    config = DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0, confirm_s=5.0)
+    config = PAPERS_DECLARATION.model_copy(
+        update={"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 0.0, "confirm_s": 5.0}
+    )
     d = Declarer(G, config)
     d.arm(0.0, peaked(12, 0.6))
     assert d.update(1.0, peaked(12, 0.6)) is None  # fires from t = 1 on
@@ -120,7 +138,9 @@ def test_the_hmm_gets_its_own_mass_threshold() -> None:
 
 
 def test_upflow_pass_waits_until_the_vehicle_has_been_upflow_of_the_estimate() -> None:
-    config = DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0, upflow_pass_m=1.0)
+    config = PAPERS_DECLARATION.model_copy(
+        update={"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 0.0, "upflow_pass_m": 1.0}
+    )
     d = Declarer(G, config)
     pi = peaked(12, 0.6)  # centre (2.5, 2.5); flow toward +x, so upflow is -x
     d.arm(0.0, pi)
@@ -142,15 +162,29 @@ def test_upflow_pass_waits_until_the_vehicle_has_been_upflow_of_the_estimate() -
     assert d.update(10.0, other, (3.5, 2.5), east) is None
 
 
-def test_upflow_pass_is_off_by_default_and_for_the_hmm() -> None:
-    assert DeclarationConfig().upflow_pass_m == 0.0
+def test_upflow_pass_is_on_by_default_off_at_0_and_for_the_hmm() -> None:
+    assert DeclarationConfig().upflow_pass_m == 2.0
     config = DeclarationConfig(upflow_pass_m=2.0)
     assert config.for_mapper("hmm").upflow_pass_m == 0.0
     assert config.for_mapper("pomdp").upflow_pass_m == 2.0
+    pi = peaked(12, 0.6)  # centre (2.5, 2.5)
+    east = (1.0, 0.0)
+    mass = {"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 0.0}
+    # the default pass (persistence, its own guard, off): nothing fires until 2 m upflow
+    passing = Declarer(G, DeclarationConfig(persist_s=0.0).model_copy(update=mass))
+    passing.arm(0.0, pi)
+    assert passing.update(1.0, pi, (3.0, 2.5), east) is None  # downflow of the centre
+    assert passing.update(2.0, pi, (0.5, 2.5), east) is not None  # 2 m upflow
+    # 0 switches it off: the same map fires downflow of the centre
+    off = Declarer(G, PAPERS_DECLARATION.model_copy(update=mass))
+    off.arm(0.0, pi)
+    assert off.update(1.0, pi, (3.0, 2.5), east) is not None
 
 
 def test_persist_waits_for_odour_near_the_estimate_at_two_times_far_enough_apart() -> None:
-    config = DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0, persist_s=20.0)
+    config = PAPERS_DECLARATION.model_copy(
+        update={"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 0.0, "persist_s": 20.0}
+    )
     d = Declarer(G, config)
     pi = peaked(12, 0.6)  # centre (2.5, 2.5); visit radius 3 m
     d.arm(0.0, pi)
@@ -163,19 +197,27 @@ def test_persist_waits_for_odour_near_the_estimate_at_two_times_far_enough_apart
     assert found.cell == 12
 
 
-def test_persist_is_off_by_default_and_for_the_hmm() -> None:
-    assert DeclarationConfig().persist_s == 0.0
+def test_persist_is_on_by_default_off_at_0_and_for_the_hmm() -> None:
+    assert DeclarationConfig().persist_s == 20.0
+    assert DeclarationConfig().for_mapper("hmm").persist_s == 0.0
     assert DeclarationConfig(persist_s=20.0).for_mapper("hmm").persist_s == 0.0
     assert DeclarationConfig(persist_s=20.0).for_mapper("pomdp").persist_s == 20.0
-    d = Declarer(G, DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0))
+    d = Declarer(
+        G,
+        PAPERS_DECLARATION.model_copy(
+            update={"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 0.0}
+        ),
+    )
     pi = peaked(12, 0.6)
     d.arm(0.0, pi)
-    assert d.update(1.0, pi, (2.5, 2.5)) is not None  # no odour needed at all
+    assert d.update(1.0, pi, (2.5, 2.5)) is not None  # persist_s 0: no odour needed at all
 
 
 def test_admit_ignores_a_rule_for_a_refused_cell() -> None:
     # the benchmark's perfect guard: the same peaked map fires for an admitted cell only
-    config = DeclarationConfig(rules=[DeclarationRule.MASS], probability=0.5, radius_m=0.0)
+    config = PAPERS_DECLARATION.model_copy(
+        update={"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 0.0}
+    )
     refused = Declarer(G, config, admit=lambda cell: cell != 12)
     refused.arm(0.0, peaked(12, 0.6))
     assert all(refused.update(float(t), peaked(12, 0.6)) is None for t in range(1, 20))
@@ -211,11 +253,13 @@ def test_steady_odour_asks_for_the_share_the_ticks_and_the_time_since_contact() 
     assert steady_odour(nine, 0.0, 0.0, -40.0, (1.0, 0.0), STEADY.model_copy(update={"steady_min_ticks": 9}))
 
 
-def test_steady_odour_is_refused_under_a_turned_flow_and_off_by_default() -> None:
+def test_steady_odour_is_refused_under_a_turned_flow_on_by_default_and_off_at_0() -> None:
     record = odour_record([True] * 60)
     assert steady_odour(record, 0.0, 0.0, 0.0, (math.cos(0.1), math.sin(0.1)), STEADY)  # 5.7 degrees
     assert not steady_odour(record, 0.0, 0.0, 0.0, (math.cos(0.11), math.sin(0.11)), STEADY)  # 6.3
-    assert not steady_odour(record, 0.0, 0.0, 0.0, (1.0, 0.0), DeclarationConfig())
+    assert DeclarationConfig().steady_hit_rate == 0.75
+    assert steady_odour(record, 0.0, 0.0, 0.0, (1.0, 0.0), DeclarationConfig())
+    assert not steady_odour(record, 0.0, 0.0, 0.0, (1.0, 0.0), PAPERS_DECLARATION)
 
 
 def test_steady_odour_can_ask_for_the_odour_to_span_a_time() -> None:
