@@ -91,7 +91,7 @@ def log_non_detection(px: FloatArray, py: FloatArray, mu: float) -> FloatArray:
     with np.errstate(divide="ignore"):
         for lag in np.flatnonzero(direct):
             rows, cols = slice(r0[lag], r1[lag]), slice(c0[lag], c1[lag])
-            out[rows, cols] += np.log1p(-mu * np.outer(py[lag, rows], px[lag, cols]))
+            out[rows, cols] += np.log1p(-mu * (py[lag, rows, None] * px[lag, None, cols]))
     return out
 
 
