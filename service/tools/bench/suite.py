@@ -28,15 +28,6 @@ from service.core.config import Config, load_config
 from service.tools.bench.search import FailureClass, MissionResult, run_mission
 from sim_bridge.generator import SUITE_DIR, WorldClass, available_classes, draw_scenario, load_class
 
-CLASS_KEYS = (
-    "class",
-    "runs",
-    "success_rate",
-    "wrong_declarations",
-    "median_time_s",
-    "p90_time_s",
-    "max_time_s",
-)
 SUMMARY_KEYS = ("classes", "missions", "worst_class", "worst_success_rate", "wrong_rate", "missions_per_s")
 
 
