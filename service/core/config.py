@@ -100,7 +100,6 @@ class MappingMethod(StrEnum):
     HMM = "hmm"
     BAYES = "bayes"
     POMDP = "pomdp"
-    INTERMITTENT = "intermittent"
 
 
 class MappingConfig(_Section):

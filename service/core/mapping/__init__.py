@@ -6,7 +6,6 @@ from typing import TYPE_CHECKING
 
 from service.core.mapping.bayes import BayesMapper
 from service.core.mapping.hmm import HmmMapper
-from service.core.mapping.intermittent import IntermittentMapper
 from service.core.mapping.mapper import Estimate, MapperParams, SourceMapper
 from service.core.mapping.pomdp import PomdpMapper
 
@@ -18,12 +17,11 @@ MAPPERS: dict[str, type[SourceMapper]] = {
     HmmMapper.name: HmmMapper,
     BayesMapper.name: BayesMapper,
     PomdpMapper.name: PomdpMapper,
-    IntermittentMapper.name: IntermittentMapper,
 }
 
 
 def make_mapper(method: str, grid: Grid, params: MapperParams | None = None) -> SourceMapper:
-    """The mapper registered under ``method`` (``hmm``, ``bayes``, ``pomdp``, ``intermittent``)."""
+    """The mapper registered under ``method`` (``hmm``, ``bayes``, ``pomdp``)."""
     try:
         cls = MAPPERS[method]
     except KeyError:

@@ -57,7 +57,7 @@ def test_x_min_not_below_x_max(tmp_path: Path) -> None:
 
 
 def test_bad_method_is_named(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match=r"mapping\.method: .*'hmm', 'bayes', 'pomdp' or 'intermittent'"):
+    with pytest.raises(ConfigError, match=r"mapping\.method: .*'hmm', 'bayes' or 'pomdp'"):
         load_config(write(tmp_path, "[mapping]\nmethod = 'kalman'\n"))
 
 

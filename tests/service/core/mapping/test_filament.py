@@ -156,3 +156,23 @@ def test_drift_spread_widens_by_eq_d1() -> None:
         np.testing.assert_allclose(
             py[int(lag) - 1], reference_factor(y_edges, 3.0, drift_y, spread), atol=1e-14
         )
+
+
+def _flow_steps(n: int, dx: float) -> list[FlowStep]:
+    grid = Grid(0.0, 100.0, -50.0, 50.0, 40, 25)
+    step = transition(grid, dx, 0.0, 1.0, 0.2, 0.2)
+    return [FlowStep(step, dx, 0.0, 1.0) for _ in range(n)]
+
+
+def test_the_prehistory_continues_the_record_with_its_mean_step() -> None:
+    lag, dx, dy = release_offsets(_flow_steps(3, 1.0), reach_m=10.0)
+    np.testing.assert_allclose(lag, np.arange(1.0, 11.0))
+    np.testing.assert_allclose(dx, np.arange(1.0, 11.0))
+    np.testing.assert_allclose(dy, 0.0)
+    plain = release_offsets(_flow_steps(3, 1.0))
+    np.testing.assert_allclose(plain[0], [1.0, 2.0, 3.0])
+
+
+def test_without_a_flow_there_is_no_prehistory() -> None:
+    lag, _, _ = release_offsets(_flow_steps(3, 0.0), reach_m=10.0)
+    assert len(lag) == 3

@@ -6,7 +6,6 @@ import pytest
 from service.core.grid import Grid
 from service.core.mapping import MAPPERS
 from service.core.mapping.bayes import BayesMapper
-from service.core.mapping.intermittent import IntermittentMapper
 from service.core.mapping.mapper import MapperParams, SourceMapper
 from service.core.mapping.pomdp import PomdpMapper
 from service.core.observation import Observation
@@ -33,7 +32,7 @@ def random_observations(rng: np.random.Generator, count: int) -> list[Observatio
     return out
 
 
-@pytest.mark.parametrize("mapper_class", [BayesMapper, PomdpMapper, IntermittentMapper])
+@pytest.mark.parametrize("mapper_class", [BayesMapper, PomdpMapper])
 @pytest.mark.parametrize(
     "params",
     [MapperParams(window=30), MapperParams(window=30, sigma_x=0.05, sigma_y=0.02, mu=1.0, false_alarm=0.0)],
@@ -57,7 +56,6 @@ def test_map_stays_a_distribution_under_random_updates(
     assert mapper.ignored["time_not_increasing"] > 1000
 
 
-# premise: misses drive cells toward zero, which the intermittent mapper does not (its patchy levels)
 @pytest.mark.parametrize("mapper_class", [BayesMapper, PomdpMapper])
 def test_impossible_event_leaves_the_map_alone(mapper_class: type[SourceMapper]) -> None:
     mapper = mapper_class(SMALL, MapperParams(false_alarm=0.0))
@@ -72,7 +70,7 @@ def test_impossible_event_leaves_the_map_alone(mapper_class: type[SourceMapper])
     np.testing.assert_array_equal(mapper.likelihood, before)
 
 
-@pytest.mark.parametrize("mapper_class", [BayesMapper, PomdpMapper, IntermittentMapper])
+@pytest.mark.parametrize("mapper_class", [BayesMapper, PomdpMapper])
 @pytest.mark.parametrize("flow", [(1.0, 0.5), (-1.0, -0.5), (0.0, 1.2)])
 def test_detection_moves_mass_upflow(mapper_class: type[SourceMapper], flow: tuple[float, float]) -> None:
     u = np.array(flow)
@@ -106,10 +104,9 @@ def test_detection_moves_mass_upflow(mapper_class: type[SourceMapper], flow: tup
 
 def test_every_registered_mapper_is_covered() -> None:
     # a new mapper joins the parametrisations above (hmm's invariants are in test_hmm.py)
-    assert set(MAPPERS) == {"hmm", "bayes", "pomdp", "intermittent"}
+    assert set(MAPPERS) == {"hmm", "bayes", "pomdp"}
 
 
-# premise: misses drive cells toward zero, which the intermittent mapper does not (its patchy levels)
 @pytest.mark.parametrize("mapper_class", [BayesMapper, PomdpMapper])
 def test_forgetting_hands_a_share_back_to_the_uniform_prior(mapper_class: type[SourceMapper]) -> None:
     share = 0.01
