@@ -40,14 +40,13 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
 
-from service.core.config import Config, build_config
+from service.core.config import Config, load_config
 from service.core.errors import ConfigError
 from service.core.grid import Grid, Rectangle
 from sim_bridge.autopilot import AUTOPILOTS, VehicleKind
 from sim_bridge.scenarios import Scenario, WorldSpec
 
 SUITE_DIR = Path(__file__).resolve().parent.parent / "config" / "suites"
-DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "config" / "default.toml"
 
 GENERATOR_STREAM = 7
 """Spawn key of the generator's own random stream: apart from build_world's streams (0-4)."""
@@ -350,7 +349,7 @@ def draw_scenario(world_class: WorldClass, seed: int, config: Config | None = No
     """The world ``seed`` of ``world_class``, run by the service configuration ``config``
     (default: config/default.toml) with the class's area, the drawn obstacles and the GUIDED mode
     of the drawn vehicle."""
-    base = config if config is not None else build_config(tomllib.loads(DEFAULT_CONFIG.read_text("utf-8")))
+    base = config if config is not None else load_config(None)
     stream = np.random.SeedSequence([seed, _class_key(world_class.name)], spawn_key=(GENERATOR_STREAM,))
     draw = _Draw(np.random.default_rng(stream))
     spec = world_class.world

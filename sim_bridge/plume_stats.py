@@ -39,8 +39,7 @@ def hit_rate(
         peak = 0.0
         for _ in range(SAMPLES_PER_TICK):
             for _ in range(steps_per_sample):
-                world.plume.step(world.dt_s, world.flow)
-                world.flow.advance(world.dt_s)
+                world.step()
             peak = max(peak, float(world.plume.concentration(px, py)[0]))
         hits += peak >= threshold
     return hits / ticks
