@@ -35,6 +35,8 @@ from sim_bridge.world import World
 
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "config" / "scenarios"
 WORLD_KEY = "world"
+SEARCH_SECTIONS = frozenset({"mapping", "planning", "declaration"})
+"""Service tables a scenario may not hold: every world runs with the one search configuration."""
 
 
 def _as_tuple(value: Any) -> Any:
@@ -236,6 +238,12 @@ def load_scenario(name_or_path: str | Path, overrides: tuple[str, ...] | list[st
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{origin}: not valid TOML: {exc}") from None
+    search = sorted(set(data) & SEARCH_SECTIONS)
+    if search:
+        raise ConfigError(
+            f"{origin}: [{search[0]}]: a scenario sets only the area, the vehicle, its sensors and the"
+            " world; the search settings are the service's (config/default.toml, or --set)"
+        )
     world_data = data.pop(WORLD_KEY, None)
     if not isinstance(world_data, dict):
         raise ConfigError(f"{origin}: missing [{WORLD_KEY}] table")

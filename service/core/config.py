@@ -136,17 +136,9 @@ class PlanningConfig(_Section):
     apf_obstacle_gain: float = Field(default=1.0, ge=0)
     apf_obstacle_range_m: float = Field(default=5.0, gt=0)
     zigzag_spacing_m: float = Field(default=30.0, gt=0)
-    zigzag_diagonal_start: bool = False
-    """The first zigzag leg advances a spacing along the flow instead of crossing at the start's line."""
-    zigzag_downflow_near_edge: bool = True
-    """A start less than ``zigzag_near_edge_spacings`` zigzag spacings from the upflow edge sweeps
-    downflow first."""
-    zigzag_near_edge_spacings: float = Field(default=1.5, gt=0, le=10)
-    """How near the upflow edge, in zigzag spacings, ``zigzag_downflow_near_edge`` applies."""
-    zigzag_young_plume_s: float = Field(default=0.0, ge=0, le=3600)
-    """For a plume released since the mission began: the mission's first upflow sweep first runs
-    upflow so that its first leg can meet a plume that young (``planning.zigzag.young_plume_lead``,
-    with this as the time from the leg's start to the plume); 0: off, for a source long released."""
+    zigzag_near_edge_spacings: float = Field(default=1.5, ge=0, le=10)
+    """A start less than this many zigzag spacings from the upflow edge sweeps downflow first
+    (0: always upflow first, the papers' sweep)."""
     cast_width_m: float = Field(default=10.0, gt=0)
     cast_legs: int = Field(default=4, ge=0, le=100)
     lost_trace_mass: float = Field(default=0.2, ge=0, le=1)
@@ -199,9 +191,6 @@ class DeclarationConfig(_Section):
     """No rule fires until odour has been detected within ``visit_radius_m`` of the estimate at
     two times at least this far apart, s (0: off). Bayesian mappers only, like the upflow pass it
     guards (farrell2003, hmm + astar, 200 runs: 64 % -> 53.5 %)."""
-    probe_to_pass: bool = True
-    """The probe upflow of the estimate is flown until the vehicle is ``upflow_pass_m`` upflow of
-    its centre, not only until it enters the cell upflow."""
     check_upflow_m: float = Field(default=3.0, gt=0)
     """How far upflow of the estimated cell's centre the check crosses the flow, m."""
     steady_hit_rate: float = Field(default=0.75, ge=0, le=1)

@@ -6,10 +6,8 @@ tracing, and source declaration". The states:
 - ``FIND`` (published as ``search``): no detection yet; a zigzag sweep across the flow
   (``planning.zigzag``), sweeping back the other way when it reaches the edge of the area, laid
   out anew when the mean flow over the mapper's history turns by more than 45 degrees. It goes
-  upflow first, or with ``zigzag_downflow_near_edge`` downflow from a start less than
-  ``zigzag_near_edge_spacings`` spacings from the upflow edge. With ``zigzag_young_plume_s`` > 0
-  (a release begun with the mission) the first upflow sweep first runs upflow, so that its first
-  leg crosses where the young plume already reaches (``zigzag.young_plume_lead``).
+  upflow first, or downflow from a start less than ``zigzag_near_edge_spacings`` spacings from
+  the upflow edge.
 - ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate.
 - ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
   last detection (``planning.cast``), then the planner again. A detection returns to ``TRACE``.
@@ -28,7 +26,7 @@ tracing, and source declaration". The states:
   that pass is flown; odour found upflow of the estimate, or another estimate, calls it off. A
   plume that swung off the vehicle's line looks to the maps like the upflow end of a plume; the
   check looks for it where it would be. At the estimate the vehicle probes upflow (the cell
-  upflow, or with ``declaration.probe_to_pass`` a point just beyond the upflow pass), so that the
+  upflow, or with ``declaration.upflow_pass_m`` > 0 a point just beyond the upflow pass), so that the
   declaration's upflow pass is made.
 
 ``Mission.step`` is pure: its inputs are this tick's observation (whose ``time_s`` is the only
@@ -61,7 +59,7 @@ from service.core.planning.crossflow import FlowFrame
 from service.core.planning.declaration import Declarer, mass_within, steady_odour
 from service.core.planning.reach import Reachability
 from service.core.planning.safety import clamped_cell, safe_plan, segment_clear
-from service.core.planning.zigzag import sweeps_upflow_first, young_plume_lead, zigzag_vertices
+from service.core.planning.zigzag import sweeps_upflow_first, zigzag_vertices
 
 if TYPE_CHECKING:
     from service.core.config import Config
@@ -76,9 +74,9 @@ SWEEP_REDRAW_RAD = math.pi / 4.0
 
 
 PASS_PROBE_MARGIN_M = 0.25
-"""``probe_to_pass`` flies this far beyond the upflow pass, so that the pass is met, not grazed."""
+"""The probe to the upflow pass flies this far beyond the upflow pass, so that the pass is met, not grazed."""
 PASS_PROBE_REACHED_M = 0.3
-"""The ``probe_to_pass`` point counts as reached this close to it."""
+"""The upflow pass probe's point counts as reached this close to it."""
 UPFLOW_PROBES: tuple[tuple[int, int], ...] = tuple(
     (d_row, d_col) for d_row in (-1, 0, 1) for d_col in (-1, 0, 1) if (d_row, d_col) != (0, 0)
 )
@@ -206,9 +204,6 @@ class Mission:
         self._last_time: float | None = None
         self._last_detection: tuple[float, float, float] | None = None  # (t, x, y)
         self._frame: FlowFrame | None = None
-        self._flow_mps = 0.0  # mean flow speed over the mapper's flow history
-        self._started_s: float | None = None  # time of the mission's first tick
-        self._first_sweep = True  # the next sweep laid is the mission's first (zigzag_young_plume_s)
         self._pattern: tuple[Waypoint, ...] = ()
         self._pattern_index = 0
         self._sweep_frame: FlowFrame | None = None
@@ -218,7 +213,7 @@ class Mission:
         self._probe: int | None = None  # a probe beyond an obstacle, flown until reached
         self._paused_sweep: tuple[tuple[Waypoint, ...], int] | None = None  # (pattern, index) at contact
         self._contact_hits = 0  # detections since the sweep was paused
-        self._pass_probe: tuple[int, Waypoint] | None = None  # (estimate, point) of probe_to_pass
+        self._pass_probe: tuple[int, Waypoint] | None = None  # (estimate, point) of the pass probe
         self._recent: deque[Observation] = deque()  # the last ticks, for steady_odour
         self._first_odour_s: float | None = None  # the mission's first detection (this run)
 
@@ -254,7 +249,6 @@ class Mission:
         x, y = state["last_detection_x"], state["last_detection_y"]
         self._last_detection = None if t is None else (float(t), float(x), float(y))
         self._state = phase
-        self._first_sweep = False  # the plume's age since the mission began is not saved
         if phase is not MissionState.FIND and self._last_time is not None:
             self._declarer.arm(self._last_time, self.mapper.likelihood)
 
@@ -264,8 +258,6 @@ class Mission:
             # a repeated or out-of-order tick changes nothing (the mapper would ignore it too)
             return MissionOutput(obs.time_s, self._state, None, (), self.mapper.estimate())
         self._last_time = obs.time_s
-        if self._started_s is None:
-            self._started_s = obs.time_s
         self.mapper.update(obs)
         self._update_mean_flow(obs)
         self._remember(obs)
@@ -297,14 +289,12 @@ class Mission:
             self._recent.popleft()
 
     def _update_mean_flow(self, obs: Observation) -> None:
-        """The direction (``_frame``) and speed (``_flow_mps``) of the mean flow over the mapper's
+        """The direction (``_frame``) of the mean flow over the mapper's
         flow history (this tick's flow before there is any): turbulent noise on single ticks must
         not turn the sweep around."""
         history = self.mapper.history
         dx = sum(step.dx_m for step in history) if history else obs.flow_x
         dy = sum(step.dy_m for step in history) if history else obs.flow_y
-        dt = sum(step.dt_s for step in history) if history else 1.0
-        self._flow_mps = math.hypot(dx, dy) / dt
         self._frame = FlowFrame.from_flow(dx, dy, self._frame)
 
     # -- state machine -------------------------------------------------------------------------
@@ -416,7 +406,7 @@ class Mission:
 
     def _find(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
         frame = self._frame or FlowFrame(1.0, 0.0)
-        if self._sweep_frame is None and self.planning.zigzag_downflow_near_edge:
+        if self._sweep_frame is None and self.planning.zigzag_near_edge_spacings > 0.0:
             v, p = ctx.vehicle, self.planning
             near_m = p.zigzag_near_edge_spacings * p.zigzag_spacing_m
             self._sweep_upflow = sweeps_upflow_first(self.grid, v.x, v.y, frame, near_m)
@@ -431,22 +421,9 @@ class Mission:
 
     def _lay_sweep(self, ctx: PlanContext, frame: FlowFrame) -> None:
         v = ctx.vehicle
-        lead = 0.0
-        young_s = self.planning.zigzag_young_plume_s
-        if self._first_sweep and self._sweep_upflow and young_s > 0.0:
-            elapsed = (self._last_time or 0.0) - (self._started_s or 0.0)
-            lead = young_plume_lead(self.grid, v.x, v.y, frame, self._flow_mps, young_s + elapsed)
-        self._first_sweep = False
         self._sweep_frame = frame
         self._pattern = zigzag_vertices(
-            self.grid,
-            v.x,
-            v.y,
-            frame,
-            self.planning.zigzag_spacing_m,
-            upflow=self._sweep_upflow,
-            diagonal_start=self.planning.zigzag_diagonal_start,
-            lead_m=lead,
+            self.grid, v.x, v.y, frame, self.planning.zigzag_spacing_m, upflow=self._sweep_upflow
         )
         self._pattern_index = 0
 
@@ -485,10 +462,10 @@ class Mission:
         return self._route(self.planner, ctx)
 
     def _pass_probe_target(self, ctx: PlanContext) -> Waypoint | None:
-        """With ``probe_to_pass``: the point just beyond the upflow pass of the estimate, if the
+        """The point just beyond the upflow pass of the estimate, if the
         pass is still to be made and the leg there is clear; else None (the cell probe)."""
         pass_m = self._declaration.upflow_pass_m
-        if not self._declaration.probe_to_pass or pass_m <= 0.0 or self._frame is None:
+        if pass_m <= 0.0 or self._frame is None:
             return None
         if self._declarer.passed_upflow:
             return None

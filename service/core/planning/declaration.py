@@ -40,8 +40,8 @@ With ``persist_s`` > 0 no rule fires until odour has been detected within ``visi
 the estimated cell's centre at two times at least ``persist_s`` apart. A source keeps releasing
 where it is, so odour comes back to it however the plume meanders; where a meandering plume has
 swung away, odour was there only while it passed. The guard does not depend on how the vehicle
-looks upflow, so the probe can be made to complete the upflow pass (``probe_to_pass``, in the
-mission) without the wrong declarations that easing the pass otherwise brings.
+looks upflow, so the mission's probe can fly on until the upflow pass is made without the wrong
+declarations that easing the pass otherwise brings.
 
 With ``steady_hit_rate`` > 0 the mission may skip the check across the flow (``check_width_m``)
 when the odour near the estimate has been steady (``steady_odour``). A source releases all the

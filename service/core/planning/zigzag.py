@@ -38,25 +38,6 @@ def sweeps_upflow_first(grid: Grid, x: float, y: float, frame: FlowFrame, near_m
     return frame.along(x, y) - lo >= near_m
 
 
-def young_plume_lead(
-    grid: Grid, x: float, y: float, frame: FlowFrame, flow_mps: float, age_s: float
-) -> float:
-    """How far a sweep from (x, y) should run upflow before its first leg, for a plume whose
-    release began ``age_s`` before a first leg begun at (x, y) would meet it (0 for ``age_s`` 0).
-
-    Such a plume reaches at most ``flow_mps`` times its age downflow of its source, so a leg
-    crossing the flow at along-position a meets only the sources from a to that far upflow of a.
-    Running L m upflow first (with the vehicle about as fast as the flow) makes the plume L s older
-    where the leg meets it, so the leg covers the sources from L to 2 L + ``flow_mps`` ``age_s``
-    upflow of the start: L = (d - ``flow_mps`` ``age_s``) / 2, for a start d m downflow of the upflow
-    edge, makes that reach the edge. A start nearer the edge needs no lead.
-    """
-    if age_s <= 0.0 or not math.isfinite(flow_mps):
-        return 0.0
-    lo, _ = along_range(grid, frame)
-    return max(0.0, (frame.along(x, y) - lo - max(flow_mps, 0.0) * age_s) / 2.0)
-
-
 def zigzag_vertices(
     grid: Grid,
     x: float,
@@ -65,8 +46,6 @@ def zigzag_vertices(
     spacing_m: float,
     *,
     upflow: bool = True,
-    diagonal_start: bool = False,
-    lead_m: float = 0.0,
 ) -> tuple[Waypoint, ...]:
     """Turning points of a zigzag from (x, y) to the upflow (or downflow) edge of the area.
 
@@ -77,28 +56,11 @@ def zigzag_vertices(
     farthest to its side: each leg then spans the whole cross-section of the band between its
     lines, and every cell is crossed within two spacings along the flow (one when the flow is
     parallel to an edge of the area). All vertices are inside the hull of the cell centres.
-
-    With ``diagonal_start`` the first vertex is on line 1, at the far side: the first leg already
-    advances along the flow instead of crossing at the start's own line. A plume is detectable
-    only so far downflow of its source, so a start far downflow gains a spacing of advance per
-    leg from the first one on.
-
-    With ``lead_m`` (upflow only) the pattern first runs straight upflow that far, stopping at the
-    edge, and the zigzag starts from there (``young_plume_lead``).
     """
     if not (math.isfinite(spacing_m) and spacing_m > 0.0):
         raise ValueError(f"zigzag spacing must be positive, got {spacing_m}")
-    if not (math.isfinite(lead_m) and lead_m >= 0.0):
-        raise ValueError(f"zigzag lead must be non-negative, got {lead_m}")
     lo, hi = along_range(grid, frame)
     a = min(max(frame.along(x, y), lo), hi)
-    lead: tuple[Waypoint, ...] = ()
-    if upflow and lead_m > 0.0 and a > lo:
-        a = max(a - lead_m, lo)
-        span = cross_section(grid, frame, a)
-        if span is not None:
-            start = frame.point(a, min(max(frame.cross(x, y), span[0]), span[1]))
-            lead, x, y = (start,), start.x, start.y
     end = lo if upflow else hi
     lines = [a]
     while lines[-1] != end:
@@ -108,9 +70,6 @@ def zigzag_vertices(
         return ()
     s = frame.cross(x, y)
     side = 1.0 if first[1] - s >= s - first[0] else -1.0
-    skip = diagonal_start and len(lines) > 1
-    if skip:
-        side = -side
     x0, y0, x1, y1 = centre_hull(grid)
     corners = [(cx, cy) for cx in (x0, x1) for cy in (y0, y1)]
     vertices: list[Waypoint] = []
@@ -133,4 +92,4 @@ def zigzag_vertices(
                     best = c
             vertices.append(best)
         side = -side
-    return lead + tuple(vertices[1:] if skip else vertices)
+    return tuple(vertices)

@@ -57,8 +57,7 @@ class ScriptedMapper(SourceMapper):
 
 PAPERS_PLANNING = PlanningConfig(
     zigzag_spacing_m=10.0,
-    zigzag_downflow_near_edge=False,
-    zigzag_near_edge_spacings=1.0,
+    zigzag_near_edge_spacings=0.0,
     lost_trace_mass=0.0,
     lost_after_s=20.0,
     flat_map_ratio=0.0,
@@ -70,7 +69,7 @@ PAPERS_PLANNING = PlanningConfig(
 lone contacts); a test of one of those turns it on."""
 
 PAPERS_DECLARATION = DeclarationConfig(
-    upflow_pass_m=0.0, check_width_m=0.0, persist_s=0.0, probe_to_pass=False, steady_hit_rate=0.0
+    upflow_pass_m=0.0, check_width_m=0.0, persist_s=0.0, steady_hit_rate=0.0
 )
 """The declaration these tests were written against: the papers' rules without the later guards
 (no upflow pass, check across the flow, persistence or steady-odour test)."""
@@ -577,54 +576,28 @@ def test_a_lone_detection_from_the_sweep_resumes_the_sweep(
 
 
 def test_a_start_near_the_upflow_edge_sweeps_downflow_first() -> None:
-    def first_leg(start_x: float, near_edge: bool, spacings: float = 1.0) -> Waypoint:
-        planning = PlanningConfig(
-            zigzag_spacing_m=30.0,
-            zigzag_diagonal_start=True,
-            zigzag_downflow_near_edge=near_edge,
-            zigzag_near_edge_spacings=spacings,
-        )
+    def second_leg(start_x: float, spacings: float) -> Waypoint:
+        """The end of the sweep's second leg: the first crosses the flow at the start's line."""
+        planning = PlanningConfig(zigzag_spacing_m=30.0, zigzag_near_edge_spacings=spacings)
         mission = Mission(AREA, ScriptedMapper(AREA), planning, NEVER)
         v = VehicleState(start_x, 10.0)
         out = mission.step(Observation(0.0, v.x, v.y, 1.0, 0.0, False), v)  # flow East
         assert out.waypoints is not None
-        return out.waypoints[0]
-
-    # 15 m from the upflow (West) edge: a spacing downflow with the rule, to the edge without it
-    assert first_leg(17.5, True).x == pytest.approx(47.5)
-    assert first_leg(17.5, False).x == pytest.approx(AREA.x_centres[0])
-    # a spacing or more from the edge, the sweep goes upflow either way
-    assert first_leg(47.5, True) == first_leg(47.5, False)
-    assert first_leg(47.5, True).x == pytest.approx(17.5)
-    # "near" can be set in spacings: 37.5 m from the edge is within 1.5 (45 m), not within 1.25
-    assert first_leg(40.0, True, 1.5).x == pytest.approx(70.0)
-    assert first_leg(40.0, True, 1.25).x == pytest.approx(10.0)
-    assert first_leg(40.0, False, 1.5) == first_leg(40.0, True, 1.25)
-
-
-def test_the_first_sweep_leads_upflow_for_a_young_plume() -> None:
-    planning = PlanningConfig(zigzag_spacing_m=30.0, zigzag_diagonal_start=True, zigzag_young_plume_s=40.0)
-    start = VehicleState(AREA.x_centres[0] + 80.0, -40.0)  # 80 m downflow of the upflow edge
-
-    def first_waypoint(mission: Mission, t: float, flow_x: float) -> Waypoint:
-        out = mission.step(Observation(t, start.x, start.y, flow_x, 0.0, False), start)
+        assert out.waypoints[0].x == pytest.approx(start_x)
+        v = VehicleState(out.waypoints[0].x, out.waypoints[0].y)
+        out = mission.step(Observation(1.0, v.x, v.y, 1.0, 0.0, False), v)
         assert out.waypoints is not None
         return out.waypoints[0]
 
-    # (80 - 1 m/s x 40 s) / 2 = 20 m straight upflow, then the zigzag
-    led = first_waypoint(Mission(AREA, ScriptedMapper(AREA), planning, NEVER), 0.0, 1.0)
-    assert (led.x, led.y) == (pytest.approx(start.x - 20.0), pytest.approx(start.y))
-    # a flow twice as fast carries a 40 s old plume 80 m: no lead
-    fast = first_waypoint(Mission(AREA, ScriptedMapper(AREA), planning, NEVER), 0.0, 2.0)
-    plain = planning.model_copy(update={"zigzag_young_plume_s": 0.0})
-    assert fast == first_waypoint(Mission(AREA, ScriptedMapper(AREA), plain, NEVER), 0.0, 2.0)
-    assert fast.x == pytest.approx(start.x - 30.0)
-    # a restored mission does not know how old the plume is: no lead
-    mission = Mission(AREA, ScriptedMapper(AREA), planning, NEVER)
-    first_waypoint(mission, 0.0, 1.0)
-    restored = Mission(AREA, ScriptedMapper(AREA), planning, NEVER)
-    restored.restore_state(mission.save_state())
-    assert first_waypoint(restored, 1.0, 1.0).x == pytest.approx(start.x - 30.0)
+    # 15 m from the upflow (West) edge: a spacing downflow with the rule, to the edge without it
+    assert second_leg(17.5, 1.0).x == pytest.approx(47.5)
+    assert second_leg(17.5, 0.0).x == pytest.approx(AREA.x_centres[0])
+    # a spacing or more from the edge, the sweep goes upflow either way
+    assert second_leg(47.5, 1.0) == second_leg(47.5, 0.0)
+    assert second_leg(47.5, 1.0).x == pytest.approx(17.5)
+    # "near" is set in spacings: 37.5 m from the edge is within 1.5 (45 m), not within 1.25
+    assert second_leg(40.0, 1.5).x == pytest.approx(70.0)
+    assert second_leg(40.0, 1.25).x == pytest.approx(10.0)
 
 
 def test_probes_beyond_an_obstacle_that_blocks_every_upflow_neighbour() -> None:
@@ -757,13 +730,11 @@ def test_a_new_estimate_calls_the_check_off() -> None:
     assert vehicle.x < sx - 3.0
 
 
-@pytest.mark.parametrize("probe_to_pass", [False, True])
-def test_the_probe_upflow_can_fly_until_the_upflow_pass_is_made(probe_to_pass: bool) -> None:
+@pytest.mark.parametrize("pass_m", [0.0, 2.0])
+def test_the_probe_upflow_flies_until_the_upflow_pass_is_made(pass_m: float) -> None:
     mapper = ScriptedMapper(AREA)
     mapper.peak_at(SOURCE, 0.5)
-    decl = DeclarationConfig(
-        rules=[DeclarationRule.STABLE], stable_s=1e9, upflow_pass_m=2.0, probe_to_pass=probe_to_pass
-    )
+    decl = DeclarationConfig(rules=[DeclarationRule.STABLE], stable_s=1e9, upflow_pass_m=pass_m)
     mission = Mission(AREA, mapper, PlanningConfig(), decl)
     cx, cy = AREA.centre(SOURCE)  # (22.5, 2.5) on 5 m cells; flow East, so upflow is West
     flow = (1.0, 0.0)
@@ -771,7 +742,7 @@ def test_the_probe_upflow_can_fly_until_the_upflow_pass_is_made(probe_to_pass: b
     out = mission.step(Observation(0.0, v.x, v.y, *flow, True), v)  # at the estimate, in odour
     assert out.waypoints is not None
     point = Waypoint(cx - 2.25, cy)  # just beyond the 2 m pass
-    if not probe_to_pass:  # the cell upflow: its centre, 5 m upflow
+    if pass_m == 0.0:  # no pass to make: the cell upflow, its centre 5 m upflow
         assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)
         return
     assert out.waypoints == (point,)

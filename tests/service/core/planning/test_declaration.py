@@ -11,7 +11,7 @@ from service.core.planning.declaration import Declarer, mass_within, steady_odou
 G = Grid(0.0, 5.0, 0.0, 5.0, columns=5, rows=5)  # 1 m cells
 
 PAPERS_DECLARATION = DeclarationConfig(
-    upflow_pass_m=0.0, check_width_m=0.0, persist_s=0.0, probe_to_pass=False, steady_hit_rate=0.0
+    upflow_pass_m=0.0, check_width_m=0.0, persist_s=0.0, steady_hit_rate=0.0
 )
 """The declaration these tests were written against: the papers' rules without the later guards
 (no upflow pass, check across the flow, persistence or steady-odour test); each test turns on

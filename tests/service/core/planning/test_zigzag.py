@@ -7,7 +7,7 @@ import pytest
 from service.core.grid import Grid
 from service.core.planning.cast import cast_vertices
 from service.core.planning.crossflow import FlowFrame
-from service.core.planning.zigzag import sweeps_upflow_first, young_plume_lead, zigzag_vertices
+from service.core.planning.zigzag import sweeps_upflow_first, zigzag_vertices
 
 PAPER = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25)
 
@@ -142,24 +142,6 @@ def test_cast_is_clipped_to_the_area_and_merges_repeats() -> None:
     assert cast_vertices(PAPER, 20.0, 40.0, frame, 10.0, 0) == ()
 
 
-def test_a_diagonal_start_advances_from_the_first_leg() -> None:
-    frame = FlowFrame.from_flow(1.0, 0.0)  # flow East: legs run North-South, advancing West
-    across = zigzag_vertices(PAPER, 90.0, 10.0, frame, 10.0)
-    diagonal = zigzag_vertices(PAPER, 90.0, 10.0, frame, 10.0, diagonal_start=True)
-    y_lo, y_hi = PAPER.y_centres[0], PAPER.y_centres[-1]
-    # across: the first leg crosses at the start's own line, to the far side (South from y = 10)
-    assert (across[0].x, across[0].y) == (90.0, pytest.approx(y_lo))
-    # diagonal: the first leg already ends a spacing upflow, on that far side
-    assert (diagonal[0].x, diagonal[0].y) == (80.0, pytest.approx(y_lo))
-    # then the same zigzag, alternating sides a spacing apart, one leg fewer
-    assert [v.x for v in diagonal] == [v.x for v in across[1:]]
-    assert [round(v.y, 6) for v in diagonal] == [round(v.y, 6) for v in across[:-1]]
-    assert {round(v.y, 6) for v in diagonal} == {round(y_lo, 6), round(y_hi, 6)}
-    # a start already on the upflow edge has no line to advance to: the leg across is kept
-    edge = zigzag_vertices(PAPER, PAPER.x_centres[0], 10.0, frame, 10.0, diagonal_start=True)
-    assert edge == zigzag_vertices(PAPER, PAPER.x_centres[0], 10.0, frame, 10.0)
-
-
 def test_a_start_near_the_upflow_edge_sweeps_downflow_first() -> None:
     east = FlowFrame.from_flow(1.0, 0.0)  # the upflow edge is the West one; centres from x = 1.25
     edge = PAPER.x_centres[0]
@@ -175,67 +157,3 @@ def test_a_start_near_the_upflow_edge_sweeps_downflow_first() -> None:
     assert sweeps_upflow_first(PAPER, 50.0, -30.0, north, 10.0)
     # "near" is a distance: 45 m takes in a start 40 m from the edge that 30 m leaves out
     assert not sweeps_upflow_first(PAPER, edge + 40.0, 0.0, east, 45.0)
-
-
-def test_young_plume_lead_reaches_the_upflow_edge() -> None:
-    east = FlowFrame.from_flow(1.0, 0.0)  # the upflow edge is the West one; centres from x = 1.25
-    edge = PAPER.x_centres[0]
-    # L = (d - u age) / 2 for a start d m downflow of the edge
-    assert young_plume_lead(PAPER, edge + 80.0, 0.0, east, 1.0, 40.0) == pytest.approx(20.0)
-    assert young_plume_lead(PAPER, edge + 80.0, 0.0, east, 2.0, 20.0) == pytest.approx(20.0)
-    assert young_plume_lead(PAPER, edge + 80.0, 0.0, east, 0.5, 40.0) == pytest.approx(30.0)
-    # near the edge, an old plume, or no such assumption: no lead
-    assert young_plume_lead(PAPER, edge + 30.0, 0.0, east, 1.0, 40.0) == 0.0
-    assert young_plume_lead(PAPER, edge + 80.0, 0.0, east, 1.0, 200.0) == 0.0
-    assert young_plume_lead(PAPER, edge + 80.0, 0.0, east, 1.0, 0.0) == 0.0
-    assert young_plume_lead(PAPER, edge + 80.0, 0.0, east, math.nan, 40.0) == 0.0
-    # the flow reversed: the start is 17.5 m from the upflow (East) edge
-    assert young_plume_lead(PAPER, edge + 80.0, 0.0, FlowFrame.from_flow(-1.0, 0.0), 1.0, 40.0) == 0.0
-
-
-def test_a_lead_runs_upflow_then_zigzags_from_there() -> None:
-    east = FlowFrame.from_flow(1.0, 0.0)
-    led = zigzag_vertices(PAPER, 81.25, 10.0, east, 30.0, diagonal_start=True, lead_m=20.0)
-    assert (led[0].x, led[0].y) == (pytest.approx(61.25), pytest.approx(10.0))
-    assert led[1:] == zigzag_vertices(PAPER, 61.25, 10.0, east, 30.0, diagonal_start=True)
-    # a lead beyond the edge stops at it; a downflow sweep has none
-    far = zigzag_vertices(PAPER, 11.25, 10.0, east, 30.0, lead_m=50.0)
-    assert (far[0].x, far[0].y) == (pytest.approx(PAPER.x_centres[0]), pytest.approx(10.0))
-    down = zigzag_vertices(PAPER, 61.25, 10.0, east, 30.0, upflow=False)
-    assert zigzag_vertices(PAPER, 61.25, 10.0, east, 30.0, upflow=False, lead_m=20.0) == down
-    with pytest.raises(ValueError, match="lead"):
-        zigzag_vertices(PAPER, 61.25, 10.0, east, 30.0, lead_m=-1.0)
-
-
-def first_meeting(track: list[tuple[float, float]], source: tuple[float, float]) -> float | None:
-    """When a 1 m/s vehicle on the polyline first crosses the straight plume of a source that began
-    releasing at t = 0 into a 1 m/s flow East: the plume lies on y = source y, from the source
-    to t m downflow of it."""
-    t = 0.0
-    for (x0, y0), (x1, y1) in itertools.pairwise(track):
-        length = math.hypot(x1 - x0, y1 - y0)
-        if length > 0.0 and min(y0, y1) <= source[1] <= max(y0, y1) and y1 != y0:
-            f = (source[1] - y0) / (y1 - y0)
-            x, when = x0 + f * (x1 - x0), t + f * length
-            if source[0] <= x <= source[0] + when:
-                return when
-        t += length
-    return None
-
-
-def test_a_led_first_leg_meets_a_young_plume_the_plain_one_misses() -> None:
-    east = FlowFrame.from_flow(1.0, 0.0)
-    start, source = (81.25, -40.0), (20.0, 0.0)
-    lead = young_plume_lead(PAPER, *start, east, 1.0, 40.0)
-    assert lead == pytest.approx(20.0)
-    plain = [start] + [(v.x, v.y) for v in zigzag_vertices(PAPER, *start, east, 30.0, diagonal_start=True)]
-    led = [start] + [
-        (v.x, v.y) for v in zigzag_vertices(PAPER, *start, east, 30.0, diagonal_start=True, lead_m=lead)
-    ]
-    t_led, t_plain = first_meeting(led, source), first_meeting(plain, source)
-    assert t_led is not None
-    assert t_plain is not None
-    # the plain first leg crosses y = 0 at x = 68 after 42 s, 6 m ahead of the plume, and meets
-    # it only on the next leg, after 143 s; the led one crosses at x = 48 after 62 s, in the plume
-    assert t_led == pytest.approx(62.2, abs=0.1)
-    assert t_plain == pytest.approx(143.3, abs=0.1)
