@@ -151,7 +151,7 @@ def test_unknown_names_and_bad_files_are_reported(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="no such scenario file"):
         load_scenario(tmp_path / "absent.toml")
     tuned = tmp_path / "tuned.toml"
-    tuned.write_text('[planning]\nzigzag_spacing_m = 10.0\n[world]\nseed = 1\n', encoding="utf-8")
+    tuned.write_text("[planning]\nzigzag_spacing_m = 10.0\n[world]\nseed = 1\n", encoding="utf-8")
     with pytest.raises(ConfigError, match=r"tuned\.toml: \[planning\]: a scenario sets only"):
         load_scenario(tuned)
     # the search settings still come from the command line
