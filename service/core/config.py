@@ -177,8 +177,6 @@ class DeclarationConfig(_Section):
     hmm-plume-mapping §IV-B1, not a posterior, and stays far flatter than the Bayesian ones."""
     radius_m: float = Field(default=3.0, ge=0)
     visit_radius_m: float = Field(default=3.0, gt=0)
-    confirm_s: float = Field(default=0.0, ge=0)
-    """A rule must keep firing for the same cell, the vehicle near it, this long, s (0: at once)."""
     upflow_pass_m: float = Field(default=2.0, ge=0)
     """No rule fires for a cell until the vehicle has been at least this far upflow of its centre
     (along the mean flow, within ``visit_radius_m`` across it) since it became the estimate, m
@@ -201,9 +199,6 @@ class DeclarationConfig(_Section):
     steady_radius_m: float = Field(default=2.5, gt=0)
     steady_min_ticks: int = Field(default=10, ge=1)
     """The least number of ticks near the estimate in the window for the share to count."""
-    steady_min_span_s: float = Field(default=0.0, ge=0)
-    """The first and last odour near the estimate in the window at least this far apart, s: a
-    plume swung over a place can give steady odour there for half a minute."""
     steady_min_contact_s: float = Field(default=40.0, ge=0)
     """How long since the mission's first odour, s, before the check may be skipped."""
     steady_turn_window_s: float = Field(default=40.0, gt=0)

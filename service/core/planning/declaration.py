@@ -19,13 +19,6 @@ argmax can sit still, or gather mass, anywhere along that line. Only observation
 estimate itself (odour just downflow of a true source, none just upflow of it) tell the cells
 of that line apart, so the vehicle has to have reached the estimate before it is named.
 
-With ``confirm_s`` > 0 a rule must keep firing, for the same estimated cell and with the
-vehicle staying near it, for that long before the source is declared. In a flow that varies in
-space (seed hmm-plume-mapping's meandering plume) the mappers' flow record, taken at the vehicle,
-does not say where the plume went: when it swings off the vehicle's line, the odour stops as it
-would upflow of a source, and the map names the place where it stopped. Waiting about one
-correlation time of the meander lets the plume swing back (odour upflow moves the estimate on).
-
 With ``upflow_pass_m`` > 0 a rule also waits until the vehicle has been at least that far upflow
 of the estimated cell's centre (along the mean flow, and within ``visit_radius_m`` of the line
 through the centre across it) since that cell became the estimate. Odour at the estimate is
@@ -101,8 +94,7 @@ def steady_odour(
 ) -> bool:
     """Whether the odour at (x, y) has been steady enough to name it without the check across the
     flow: over the last ``steady_window_s`` the vehicle spent at least ``steady_min_ticks`` ticks
-    within ``steady_radius_m`` of it and smelled odour in at least ``steady_hit_rate`` of them,
-    the first and last of those at least ``steady_min_span_s`` apart;
+    within ``steady_radius_m`` of it and smelled odour in at least ``steady_hit_rate`` of them;
     the mission's first odour came at least ``steady_min_contact_s`` ago; and the flow of the last
     ``steady_turn_window_s`` has turned, on average, no more than ``steady_max_turn_deg`` from
     ``flow_direction`` (the mean flow, a unit vector). ``samples`` are the mission's ticks in time
@@ -120,8 +112,6 @@ def steady_odour(
     ]
     odour = [s.time_s for s in near if s.detected]
     if len(near) < c.steady_min_ticks or len(odour) < c.steady_hit_rate * len(near) - 1e-9:
-        return False
-    if max(odour) - min(odour) < c.steady_min_span_s - 1e-9:
         return False
     ux, uy = flow_direction
     turns = [
@@ -157,7 +147,6 @@ class Declarer:
         self._admit = admit
         self._cell: int | None = None
         self._since_s = 0.0
-        self._firing_since_s: float | None = None  # since when a rule fires for self._cell
         self._passed_upflow = False  # the vehicle has been upflow_pass_m upflow of self._cell
         self._odour: list[tuple[float, float, float]] = []  # detections (t, x, y), for persist_s
 
@@ -174,7 +163,6 @@ class Declarer:
         """Start judging at ``time_s`` (the first detection): the stable clock starts now."""
         self._cell = int(np.argmax(likelihood))
         self._since_s = time_s
-        self._firing_since_s = None
         self._passed_upflow = False
 
     def update(
@@ -199,17 +187,14 @@ class Declarer:
         cell = int(np.argmax(likelihood))
         if cell != self._cell:
             self._cell, self._since_s = cell, time_s
-            self._firing_since_s = None
             self._passed_upflow = False
         if self.config.upflow_pass_m > 0.0:
             self._passed_upflow = self._passed_upflow or self._is_upflow(cell, vehicle_m, flow)
             if not self._passed_upflow:
-                self._firing_since_s = None
                 return None
         if vehicle_m is not None:
             cx, cy = self.grid.centre(cell)
             if math.hypot(vehicle_m[0] - cx, vehicle_m[1] - cy) > self.config.visit_radius_m:
-                self._firing_since_s = None
                 return None
         mass = mass_within(self.grid, likelihood, cell, self.config.radius_m)
         fired = {
@@ -223,11 +208,6 @@ class Declarer:
         if rules and self._admit is not None and not self._admit(cell):
             rules = ()
         if not rules:
-            self._firing_since_s = None
-            return None
-        if self._firing_since_s is None:
-            self._firing_since_s = time_s
-        if time_s - self._firing_since_s < self.config.confirm_s - 1e-9:
             return None
         x, y = self.grid.centre(cell)
         return Declaration(

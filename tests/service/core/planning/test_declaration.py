@@ -113,22 +113,6 @@ def test_mass_rule_alone_ignores_a_stable_but_flat_map() -> None:
     assert all(d.update(float(t), peaked(12, 0.1)) is None for t in range(1, 100))
 
 
-def test_confirm_waits_for_the_rule_to_keep_firing() -> None:
-    config = PAPERS_DECLARATION.model_copy(
-        update={"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 0.0, "confirm_s": 5.0}
-    )
-    d = Declarer(G, config)
-    d.arm(0.0, peaked(12, 0.6))
-    assert d.update(1.0, peaked(12, 0.6)) is None  # fires from t = 1 on
-    assert d.update(5.0, peaked(12, 0.6)) is None
-    assert d.update(5.5, peaked(12, 0.4)) is None  # stops firing: the wait starts again
-    assert d.update(6.0, peaked(12, 0.6)) is None
-    assert d.update(10.9, peaked(12, 0.6)) is None
-    found = d.update(11.0, peaked(12, 0.6))
-    assert found is not None
-    assert found.cell == 12
-
-
 def test_the_hmm_gets_its_own_mass_threshold() -> None:
     config = DeclarationConfig(probability=0.95, hmm_probability=0.25)
     assert config.for_mapper("hmm").probability == 0.25
@@ -260,12 +244,3 @@ def test_steady_odour_is_refused_under_a_turned_flow_on_by_default_and_off_at_0(
     assert DeclarationConfig().steady_hit_rate == 0.75
     assert steady_odour(record, 0.0, 0.0, 0.0, (1.0, 0.0), DeclarationConfig())
     assert not steady_odour(record, 0.0, 0.0, 0.0, (1.0, 0.0), PAPERS_DECLARATION)
-
-
-def test_steady_odour_can_ask_for_the_odour_to_span_a_time() -> None:
-    # odour in 4 ticks of 5 over the last 25 s only, near the place for 25 ticks
-    record = odour_record([t % 5 != 4 for t in range(25)])
-    assert steady_odour(record, 0.0, 0.0, -40.0, (1.0, 0.0), STEADY)
-    spanning = STEADY.model_copy(update={"steady_min_span_s": 30.0})
-    assert not steady_odour(record, 0.0, 0.0, -40.0, (1.0, 0.0), spanning)
-    assert steady_odour(odour_record([t % 5 != 4 for t in range(40)]), 0.0, 0.0, -40.0, (1.0, 0.0), spanning)
