@@ -124,7 +124,6 @@ class PlanningMethod(StrEnum):
     MLDP = "mldp"
     MLDP_PATH = "mldp-path"
     APF = "apf"
-    INFOTAXIS = "infotaxis"
     SURGE_CAST = "surge-cast"
 
 

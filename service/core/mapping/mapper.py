@@ -246,8 +246,8 @@ class SourceMapper(ABC):
     @abstractmethod
     def detection_likelihood(self, cell: int) -> FloatArray:
         """P(detection in flat cell ``cell`` now | source in each cell), shape (n, m), per this
-        mapper's own model and the current flow history. Planners (infotaxis) use it to predict
-        the outcome of visiting ``cell``."""
+        mapper's own model and the current flow history: what visiting ``cell`` is expected to
+        give."""
 
 
 class ObservationModelMapper(SourceMapper):

@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING
 from service.core.planning.apf import ApfPlanner
 from service.core.planning.astar import AStarPlanner, PaperAStarPlanner
 from service.core.planning.base import Plan, PlanContext, Planner, PlannerFactory, VehicleState, Waypoint
-from service.core.planning.infotaxis import InfotaxisPlanner
 from service.core.planning.mldp import MldpPathPlanner, MldpPlanner
 from service.core.planning.surge_cast import SurgeCastPlanner
 
@@ -26,7 +25,6 @@ PLANNERS: dict[str, PlannerFactory] = {
     MldpPlanner.name: MldpPlanner,
     MldpPathPlanner.name: MldpPathPlanner,
     ApfPlanner.name: ApfPlanner,
-    InfotaxisPlanner.name: InfotaxisPlanner,
     SurgeCastPlanner.name: SurgeCastPlanner,
 }
 

@@ -24,6 +24,6 @@ def test_default_is_the_obstacle_free_astar() -> None:
 def test_unknown_method_is_refused_by_the_configuration() -> None:
     with pytest.raises(ConfigError, match=r"planning\.method: .*'astar', 'astar-paper'"):
         build_config({}, ["planning.method=dijkstra"])
-    config = build_config({}, ["planning.method=infotaxis", "declaration.rules=['mass']"])
-    assert make_planner(G, config.planning).name == "infotaxis"
+    config = build_config({}, ["planning.method=mldp", "declaration.rules=['mass']"])
+    assert make_planner(G, config.planning).name == "mldp"
     assert [str(r) for r in config.declaration.rules] == ["mass"]
