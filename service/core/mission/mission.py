@@ -32,7 +32,7 @@ tracing, and source declaration". The states:
 ``Mission.step`` is pure: its inputs are this tick's observation (whose ``time_s`` is the only
 clock) and the vehicle state; it updates the mapper it was given and returns the waypoints to fly
 (``None``: keep flying the last ones) and the events of the tick. Every waypoint it returns comes
-out of ``_emit``, which passes it through ``planning.safety.safe_plan``: inside the search area,
+out of ``Emitter``, which passes it through ``planning.safety.safe_plan``: inside the search area,
 outside every obstacle, no leg across an obstacle. When the estimate cannot be reached, the
 planner aims at the nearest reachable cell instead; when a planner still finds no path
 (``NoPathError``), the obstacle-free A* takes over; when nothing can be planned, the vehicle holds.
@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from service.core.config import DeclarationConfig, PlanningConfig
-from service.core.errors import NoPathError
+from service.core.mission.emitter import Emitter
 from service.core.mission.events import (
     CrossCheck,
     MissionEvent,
@@ -59,14 +59,14 @@ from service.core.mission.events import (
     PlumeLost,
     SourceDeclared,
 )
+from service.core.mission.pattern import Pattern
+from service.core.mission.routing import Routing
 from service.core.planning import make_planner
-from service.core.planning.astar import AStarPlanner
 from service.core.planning.base import PlanContext, Waypoint
 from service.core.planning.cast import cast_vertices
 from service.core.planning.crossflow import FlowFrame
 from service.core.planning.declaration import Declarer, mass_within, steady_odour
-from service.core.planning.reach import Reachability
-from service.core.planning.safety import clamped_cell, safe_plan, segment_clear
+from service.core.planning.safety import clamped_cell, segment_clear
 from service.core.planning.zigzag import sweeps_upflow_first, zigzag_vertices
 
 if TYPE_CHECKING:
@@ -135,8 +135,7 @@ class Mission:
         self.mapper = mapper
         self.planning = planning or PlanningConfig()
         self.planner = planner if planner is not None else make_planner(grid, self.planning)
-        self._router = AStarPlanner(grid, self.planning)  # zigzag, cast and fallback legs
-        self._reach = Reachability(grid)
+        self._routing = Routing.of(grid, self.planning)  # zigzag, cast, probe and fallback legs
         self._declaration = (declaration or DeclarationConfig()).for_mapper(mapper.name)
         self._declarer = Declarer(grid, self._declaration, admit)
         self._check: _Check | None = None  # the upflow check of a cell about to be declared
@@ -144,14 +143,12 @@ class Mission:
         self._last_time: float | None = None
         self._last_detection: tuple[float, float, float] | None = None  # (t, x, y)
         self._frame: FlowFrame | None = None
-        self._pattern: tuple[Waypoint, ...] = ()
-        self._pattern_index = 0
+        self._pattern = Pattern()  # the sweep's, the cast's or the check's turning points
         self._sweep_frame: FlowFrame | None = None
         self._sweep_upflow = True
-        self._emitted: tuple[Waypoint, ...] | None = None
-        self._hold: Waypoint | None = None
+        self._emitter = Emitter(grid)
         self._probe: int | None = None  # a probe beyond an obstacle, flown until reached
-        self._paused_sweep: tuple[tuple[Waypoint, ...], int] | None = None  # (pattern, index) at contact
+        self._paused_sweep: Pattern | None = None  # the sweep's pattern at contact
         self._contact_hits = 0  # detections since the sweep was paused
         self._pass_probe: tuple[int, Waypoint] | None = None  # (estimate, point) of the pass probe
         self._recent: deque[Observation] = deque()  # the last ticks, for steady_odour
@@ -205,7 +202,7 @@ class Mission:
         events = self._advance(obs)
         if self._state is MissionState.DECLARED:
             declared_now = any(isinstance(e, SourceDeclared) for e in events)
-            waypoints = self._emit(vehicle, ()) if declared_now else None
+            waypoints = self._emitter.emit(vehicle, ()) if declared_now else None
         else:
             ctx = PlanContext(
                 vehicle=vehicle,
@@ -213,7 +210,7 @@ class Mission:
                 goal=self.grid.flat_index(estimate.cell),
                 mapper=self.mapper,
             )
-            waypoints = self._emit(vehicle, self._BEHAVIOUR[self._state](self, ctx))
+            waypoints = self._emitter.emit(vehicle, self._BEHAVIOUR[self._state](self, ctx))
         return MissionOutput(obs.time_s, self._state, waypoints, tuple(events), estimate)
 
     def _remember(self, obs: Observation) -> None:
@@ -250,7 +247,7 @@ class Mission:
             if self._state is not MissionState.TRACE:
                 first = self._state is MissionState.FIND and not self._declarer.armed
                 events.append(PlumeFound(t, obs.x, obs.y, first=first))
-                paused = (self._pattern, self._pattern_index) if self._state is MissionState.FIND else None
+                paused = self._pattern if self._state is MissionState.FIND else None
                 if first:
                     self._declarer.arm(t, self.mapper.likelihood)
                 self._enter(MissionState.TRACE)
@@ -268,7 +265,7 @@ class Mission:
                     # a lone detection met by the sweep and not repeated: most likely a false
                     # alarm; sweep on from where it stopped instead of casting around it
                     self._enter(MissionState.FIND)
-                    self._pattern, self._pattern_index = paused
+                    self._pattern = paused
                 else:
                     self._enter(MissionState.LOST)
         if self._declarer.armed:
@@ -323,24 +320,24 @@ class Mission:
         ax, ay = found.x - upflow * frame.ux, found.y - upflow * frame.uy
         legs = cast_vertices(self.grid, ax, ay, frame, width, 2)
         self._check = _Check(found, frame, 0.5 * upflow)
-        self._pattern, self._pattern_index = legs, 0
+        self._pattern = Pattern(legs)
         self._probe = None
         return None
 
     def _end_check(self) -> None:
         self._check = None
-        self._pattern, self._pattern_index = (), 0
+        self._pattern = Pattern()
 
     def _enter(self, state: MissionState) -> None:
         self._check = None
         self._state = state
         self._paused_sweep = None
-        self._pattern, self._pattern_index = (), 0
+        self._pattern = Pattern()
         self._probe = None
         if state is MissionState.LOST and self._last_detection is not None and self._frame is not None:
             _, x, y = self._last_detection
             p = self.planning
-            self._pattern = cast_vertices(self.grid, x, y, self._frame, p.cast_width_m, p.cast_legs)
+            self._pattern = Pattern(cast_vertices(self.grid, x, y, self._frame, p.cast_width_m, p.cast_legs))
 
     # -- behaviours: the waypoints each state wants, before the safety rule -------------------
 
@@ -352,24 +349,24 @@ class Mission:
             self._sweep_upflow = sweeps_upflow_first(self.grid, v.x, v.y, frame, near_m)
         if self._sweep_frame is None or frame.angle_to(self._sweep_frame) > SWEEP_REDRAW_RAD:
             self._lay_sweep(ctx, frame)
-        wanted = self._follow_pattern(ctx)
+        wanted = self._pattern.follow(ctx, self._routing)
         if wanted is None:  # reached the edge of the area: sweep back the other way
             self._sweep_upflow = not self._sweep_upflow
             self._lay_sweep(ctx, frame)
-            wanted = self._follow_pattern(ctx)
+            wanted = self._pattern.follow(ctx, self._routing)
         return wanted or ()
 
     def _lay_sweep(self, ctx: PlanContext, frame: FlowFrame) -> None:
         v = ctx.vehicle
         self._sweep_frame = frame
-        self._pattern = zigzag_vertices(
-            self.grid, v.x, v.y, frame, self.planning.zigzag_spacing_m, upflow=self._sweep_upflow
+        spacing = self.planning.zigzag_spacing_m
+        self._pattern = Pattern(
+            zigzag_vertices(self.grid, v.x, v.y, frame, spacing, upflow=self._sweep_upflow)
         )
-        self._pattern_index = 0
 
     def _trace(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
         if self._check is not None and not self._check.done:
-            wanted = self._follow_pattern(ctx)
+            wanted = self._pattern.follow(ctx, self._routing)
             if wanted is not None:
                 return wanted
             self._check.done = True  # declared at the next tick
@@ -377,7 +374,7 @@ class Mission:
         if self._probe is not None and self._probe != ctx.cell:
             # a probe beyond an obstacle is a detour: replanning toward the estimate each tick
             # would turn back at the first step off it, so the probe is flown until reached
-            return self._route(self._router, replace(ctx, goal=self._probe))
+            return self._routing.to_cell(ctx, self._probe)
         self._probe = None
         if self._pass_probe is not None:
             cell, target = self._pass_probe
@@ -385,7 +382,7 @@ class Mission:
             if cell == ctx.goal and not there and not self._declarer.passed_upflow:
                 return (target,)
             self._pass_probe = None
-        if self._reach.goal_for(ctx.cell, ctx.goal) == ctx.cell:
+        if self._routing.reach.goal_for(ctx.cell, ctx.goal) == ctx.cell:
             point = self._pass_probe_target(ctx)
             if point is not None:
                 self._pass_probe = (ctx.goal, point)
@@ -398,8 +395,8 @@ class Mission:
             if probe is None:
                 probe = self._probe = self._upflow_beyond(ctx.cell)
             if probe is not None:
-                return self._route(self._router, replace(ctx, goal=probe))
-        return self._route(self.planner, ctx)
+                return self._routing.to_cell(ctx, probe)
+        return self._routing.route(self.planner, ctx)
 
     def _pass_probe_target(self, ctx: PlanContext) -> Waypoint | None:
         """The point just beyond the upflow pass of the estimate, if the
@@ -449,7 +446,7 @@ class Mission:
         if self._frame is None:
             return None
         grid = self.grid
-        reachable = self._reach.reachable(cell)
+        reachable = self._routing.reach.reachable(cell)
         cx, cy = grid.centre(cell)
         step_m = 0.5 * min(grid.cell_width_m, grid.cell_height_m)
         distance_m = step_m
@@ -465,7 +462,7 @@ class Mission:
     def _lost(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
         if self._check is not None or self._map_knows_the_plume():
             return self._trace(ctx)
-        wanted = self._follow_pattern(ctx)
+        wanted = self._pattern.follow(ctx, self._routing)
         if wanted is not None:
             return wanted
         if self._map_is_flat():
@@ -502,50 +499,3 @@ class Mission:
         MissionState.TRACE: _trace,
         MissionState.LOST: _lost,
     }
-
-    def _follow_pattern(self, ctx: PlanContext) -> tuple[Waypoint, ...] | None:
-        """Waypoints to the next turning point not yet reached; None once all are reached. A
-        turning point that cannot be reached counts as reached at the nearest reachable cell."""
-        while self._pattern_index < len(self._pattern):
-            vertex = self._pattern[self._pattern_index]
-            vertex_cell = self.grid.cell_of(vertex.x, vertex.y)
-            target = self._reach.goal_for(ctx.cell, vertex_cell)
-            if target != ctx.cell:
-                # a vertex in a blocked cell (an obstacle rectangle may cover only part of a
-                # cell) would be refused by the safety rule: the route goes to its stand-in
-                straight = target == vertex_cell
-                if straight and segment_clear(
-                    self.grid, (ctx.vehicle.x, ctx.vehicle.y), (vertex.x, vertex.y)
-                ):
-                    # a clear leg is flown straight: A*'s cell staircase would put the diagonal
-                    # part of a sweep leg anywhere along it, and a leg that first runs along the
-                    # previous one sweeps nothing new
-                    return (vertex,)
-                return self._route(self._router, replace(ctx, goal=target))
-            self._pattern_index += 1
-        return None
-
-    def _route(self, planner: Planner, ctx: PlanContext) -> tuple[Waypoint, ...]:
-        """The planner's waypoints to ``ctx.goal``, or to the nearest reachable cell if the goal
-        cannot be reached; the obstacle-free A* if the planner raises NoPathError; () if that
-        fails too (the vehicle then holds)."""
-        ctx = replace(ctx, goal=self._reach.goal_for(ctx.cell, ctx.goal))
-        for candidate in (planner, self._router):
-            try:
-                return candidate.plan(ctx).waypoints
-            except NoPathError:
-                continue
-        return ()
-
-    # -- the one place waypoints leave the mission ---------------------------------------------
-
-    def _emit(self, vehicle: VehicleState, wanted: tuple[Waypoint, ...]) -> tuple[Waypoint, ...] | None:
-        """Apply the safety rule; hold on a fixed point while nothing safe is planned; None when the
-        result equals the waypoints returned last."""
-        safe = safe_plan(self.grid, vehicle, wanted, hold_at=self._hold)
-        holding = bool(safe) and safe != wanted[: len(safe)]
-        self._hold = safe[0] if holding else None
-        if not safe or safe == self._emitted:
-            return None
-        self._emitted = safe
-        return safe
