@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from service.core.mission.events import CrossCheck, SourceDeclared
+from service.core.mission.pattern import Pattern
 from service.core.planning.base import Waypoint
 from service.core.planning.cast import cast_vertices
 from service.core.planning.declaration import Declarer, mass_within, steady_odour
@@ -52,14 +53,14 @@ UPFLOW_PROBES: tuple[tuple[int, int], ...] = tuple(
 @dataclass
 class Check:
     """The upflow check of the cell where a rule fired (``found``): a cross-flow pass
-    ``check_upflow_m`` upflow of its centre (turning points ``legs``). Odour ``cancel_upflow_m``
-    or more upflow of the centre, or another estimated cell, calls it off. ``done``: the pass is
-    flown, the cell is declared at the next tick."""
+    ``check_upflow_m`` upflow of its centre (``pattern``). Odour ``cancel_upflow_m`` or more
+    upflow of the centre, or another estimated cell, calls it off. ``done``: the pass is flown,
+    the cell is declared at the next tick."""
 
     found: Declaration
     frame: FlowFrame
     cancel_upflow_m: float
-    legs: tuple[Waypoint, ...]
+    pattern: Pattern
     done: bool = False
 
     @classmethod
@@ -68,7 +69,7 @@ class Check:
         upflow = config.check_upflow_m
         ax, ay = found.x - upflow * frame.ux, found.y - upflow * frame.uy
         legs = cast_vertices(grid, ax, ay, frame, config.check_width_m, 2)
-        return cls(found, frame, 0.5 * upflow, legs)
+        return cls(found, frame, 0.5 * upflow, Pattern(legs))
 
     @property
     def cell(self) -> int:
@@ -81,6 +82,14 @@ class Check:
             return True
         # how far upflow of the centre the odour was
         return self.frame.along(self.found.x - obs.x, self.found.y - obs.y) < self.cancel_upflow_m
+
+    def waypoints(self, ctx: PlanContext, routing: Routing) -> tuple[Waypoint, ...]:
+        """The legs still to fly; once they are flown, hold where the vehicle is (``done``)."""
+        wanted = self.pattern.follow(ctx, routing)
+        if wanted is not None:
+            return wanted
+        self.done = True  # declared at the next tick
+        return (Waypoint(ctx.vehicle.x, ctx.vehicle.y),)
 
 
 @dataclass
@@ -260,7 +269,9 @@ class Declaring:
     def waypoints(
         self, ctx: PlanContext, routing: Routing, frame: FlowFrame | None
     ) -> tuple[Waypoint, ...] | None:
-        """The probe's at the estimate; None: none."""
+        """The check's legs while it is flown, else the probe's at the estimate; None: neither."""
+        if self.check is not None and not self.check.done:
+            return self.check.waypoints(ctx, routing)
         return self.probe.waypoints(ctx, routing, frame, self._declarer.passed_upflow)
 
     def _vouch(self, found: Declaration, frame: FlowFrame | None) -> CrossCheck | Check | None:
