@@ -22,7 +22,7 @@ tracing, and source declaration". The states, each flown by its own behaviour:
   vehicle holds. Rules are only judged after the first detection: before it a flat map's argmax
   never moves.
 
-A check across the flow takes over the pattern
+The transitions are ``transitions.TRANSITIONS``. A check across the flow takes over the pattern
 of the state it starts in (the sweep's or the cast's) and leaves none when called off; only the
 trace flies it to its end, so one started while sweeping (after a lone contact) is flown by the
 sweep as its own legs.
@@ -56,6 +56,7 @@ from service.core.mission.events import (
 from service.core.mission.pattern import Pattern
 from service.core.mission.routing import Routing
 from service.core.mission.sweep import Sweep
+from service.core.mission.transitions import TRANSITIONS, Cue
 from service.core.planning import make_planner
 from service.core.planning.base import PlanContext, Waypoint
 from service.core.planning.crossflow import FlowFrame
@@ -182,40 +183,48 @@ class Mission:
             if self._state is not MissionState.TRACE:
                 first = self._state is MissionState.FIND and not self._declaring.armed
                 events.append(PlumeFound(t, obs.x, obs.y, first=first))
-                from_find = self._state is MissionState.FIND
                 if first:
                     self._declaring.arm(t, self.mapper.likelihood)
-                self._enter(MissionState.TRACE)
-                self._sweep_hits = 0 if from_find else None  # a contact from the sweep pauses it
+                self._go(Cue.ODOUR)
             if self._sweep_hits is not None:
                 self._sweep_hits += 1
             self._last_detection = (t, obs.x, obs.y)
-        elif self._state is MissionState.TRACE and self._last_detection is not None:
+        elif (cue := self._quiet(t)) is not None and self._last_detection is not None:
             t_last, x_last, y_last = self._last_detection
-            p = self.planning
-            lone = self._sweep_hits is not None and self._sweep_hits <= p.lone_contact_hits
-            wait = p.lone_contact_lost_after_s if lone else p.lost_after_s
-            if t - t_last >= wait and self._declaring.check is None:
-                events.append(PlumeLost(t, x_last, y_last, t_last))
-                # a lone detection met by the sweep and not repeated: most likely a false alarm;
-                # sweep on from where it stopped (its pattern was kept) instead of casting around it
-                self._enter(MissionState.FIND if lone else MissionState.LOST)
+            events.append(PlumeLost(t, x_last, y_last, t_last))
+            self._go(cue)
         verdict = self._declaring.judge(obs, self.mapper.likelihood, self._frame)
         if isinstance(verdict, Check):
             self._take_over(verdict.pattern.vertices)
         elif verdict is not None:
             events.append(verdict)
-            self._enter(MissionState.DECLARED)
+            self._go(Cue.SOURCE)
         return events
 
-    def _enter(self, state: MissionState) -> None:
-        """Enter ``state``: a check or a probe detour ends with the state it began in; entering
-        ``LOST`` lays a cast."""
+    def _quiet(self, t: float) -> Cue | None:
+        """Whether tracing has gone without odour long enough to be lost: ``LONE_QUIET`` after a
+        lone contact of the sweep, ``QUIET`` otherwise; never while a check is flown."""
+        if self._state is not MissionState.TRACE or self._last_detection is None:
+            return None
+        p = self.planning
+        lone = self._sweep_hits is not None and self._sweep_hits <= p.lone_contact_hits
+        wait = p.lone_contact_lost_after_s if lone else p.lost_after_s
+        if t - self._last_detection[0] < wait or self._declaring.check is not None:
+            return None
+        return Cue.LONE_QUIET if lone else Cue.QUIET
+
+    def _go(self, cue: Cue) -> None:
+        """Take ``cue``'s transition (``TRANSITIONS``) and its entry actions. A check or a probe
+        detour ends with the state it began in; a contact from the sweep pauses the sweep (its
+        pattern is kept for ``LONE_QUIET``)."""
+        from_find = self._state is MissionState.FIND
+        self._state = TRANSITIONS[self._state, cue]
         self._declaring.reset()
-        self._state = state
-        self._sweep_hits = None
-        if state is MissionState.LOST:
+        self._sweep_hits = 0 if from_find and cue is Cue.ODOUR else None
+        if self._state is MissionState.LOST:
             self._cast.lay(None if self._last_detection is None else self._last_detection[1:], self._frame)
+        elif cue is Cue.FLAT_CAST:
+            self._sweep.restart()
 
     def _take_over(self, legs: tuple[Waypoint, ...]) -> None:
         """Put ``legs`` in the place of this state's pattern (the sweep's or the cast's): a check
@@ -244,8 +253,7 @@ class Mission:
         if self._cast.map_is_flat(likelihood):
             # the cast is over and the map holds no evidence: its estimate is merely the first of
             # nearly equal cells, so look for the plume again as before the first detection
-            self._enter(MissionState.FIND)
-            self._sweep.restart()
+            self._go(Cue.FLAT_CAST)
             return self._find(ctx)
         return self._trace(ctx)
 
