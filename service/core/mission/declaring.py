@@ -1,0 +1,302 @@
+"""The mission's side of the declaration: arming the rules, the check across the flow, the
+steady-odour record and the probe upflow at the estimate. The rules themselves are
+``planning.declaration``'s (``Declarer``).
+
+With ``declaration.check_width_m`` > 0 a rule that fires first sends the vehicle across the flow
+``check_upflow_m`` upflow of the estimate (``Check``), and the source is declared when that pass
+is flown; odour found upflow of the estimate, or another estimate, calls it off. A plume that
+swung off the vehicle's line looks to the maps like the upflow end of a plume; the check looks
+for it where it would be. Where the odour near the estimate has been steady (``steady_odour``)
+the check is skipped. At the estimate the vehicle probes upflow (``EstimateProbe``: the cell
+upflow, or with ``declaration.upflow_pass_m`` > 0 a point just beyond the upflow pass), so that
+the declaration's upflow pass is made.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from service.core.mission.events import CrossCheck, SourceDeclared
+from service.core.mission.pattern import Pattern
+from service.core.planning.base import Waypoint
+from service.core.planning.cast import cast_vertices
+from service.core.planning.declaration import Declarer, mass_within, steady_odour
+from service.core.planning.safety import segment_clear
+
+if TYPE_CHECKING:
+    from service.core.config import DeclarationConfig
+    from service.core.grid import Grid
+    from service.core.mapping.belief import FloatArray
+    from service.core.mission.routing import Routing
+    from service.core.observation import Observation
+    from service.core.planning.base import PlanContext
+    from service.core.planning.crossflow import FlowFrame
+    from service.core.planning.declaration import Declaration
+    from service.core.planning.reach import Reachability
+
+PASS_PROBE_MARGIN_M = 0.25
+"""The probe to the upflow pass flies this far beyond the upflow pass, so that the pass is met, not grazed."""
+PASS_PROBE_REACHED_M = 0.3
+"""The upflow pass probe's point counts as reached this close to it."""
+UPFLOW_PROBES: tuple[tuple[int, int], ...] = tuple(
+    (d_row, d_col) for d_row in (-1, 0, 1) for d_col in (-1, 0, 1) if (d_row, d_col) != (0, 0)
+)
+"""(row, column) offsets of the eight neighbours a probe upflow chooses from."""
+
+
+@dataclass
+class Check:
+    """The upflow check of the cell where a rule fired (``found``): a cross-flow pass
+    ``check_upflow_m`` upflow of its centre (``pattern``). Odour ``cancel_upflow_m`` or more
+    upflow of the centre, or another estimated cell, calls it off. ``done``: the pass is flown,
+    the cell is declared at the next tick."""
+
+    found: Declaration
+    frame: FlowFrame
+    cancel_upflow_m: float
+    pattern: Pattern
+    done: bool = False
+
+    @classmethod
+    def across(cls, grid: Grid, found: Declaration, frame: FlowFrame, config: DeclarationConfig) -> Check:
+        """Two legs ``check_width_m`` to each side across the flow, ``check_upflow_m`` upflow."""
+        upflow = config.check_upflow_m
+        ax, ay = found.x - upflow * frame.ux, found.y - upflow * frame.uy
+        legs = cast_vertices(grid, ax, ay, frame, config.check_width_m, 2)
+        return cls(found, frame, 0.5 * upflow, Pattern(legs))
+
+    @property
+    def cell(self) -> int:
+        return self.found.cell
+
+    def holds(self, obs: Observation, estimated_cell: int) -> bool:
+        if estimated_cell != self.cell:
+            return False
+        if not obs.detected:
+            return True
+        # how far upflow of the centre the odour was
+        return self.frame.along(self.found.x - obs.x, self.found.y - obs.y) < self.cancel_upflow_m
+
+    def waypoints(self, ctx: PlanContext, routing: Routing) -> tuple[Waypoint, ...]:
+        """The legs still to fly; once they are flown, hold where the vehicle is (``done``)."""
+        wanted = self.pattern.follow(ctx, routing)
+        if wanted is not None:
+            return wanted
+        self.done = True  # declared at the next tick
+        return (Waypoint(ctx.vehicle.x, ctx.vehicle.y),)
+
+
+@dataclass
+class EstimateProbe:
+    """The look upflow at the estimate, for the declaration's upflow pass.
+
+    At the estimate (or as near as it can be reached, beside an obstacle) and not yet declared,
+    staying put only repeats one observation (odour there is explained as well by any source
+    upflow), so the vehicle probes upflow: odour there rules the vehicle's cell out, none there
+    rules the cells upflow out. ``pass_target``: (estimate, point) of the probe just beyond the
+    upflow pass, flown until reached, made or the estimate moves; ``detour``: a probe cell beyond
+    an obstacle, flown until reached."""
+
+    grid: Grid
+    upflow_pass_m: float
+    detour: int | None = None
+    pass_target: tuple[int, Waypoint] | None = None
+
+    def waypoints(
+        self, ctx: PlanContext, routing: Routing, frame: FlowFrame | None, passed_upflow: bool
+    ) -> tuple[Waypoint, ...] | None:
+        """The probe's waypoints; None when there is none to fly (the planner's turn)."""
+        if self.detour is not None and self.detour != ctx.cell:
+            # a probe beyond an obstacle is a detour: replanning toward the estimate each tick
+            # would turn back at the first step off it, so the probe is flown until reached
+            return routing.to_cell(ctx, self.detour)
+        self.detour = None
+        if self.pass_target is not None:
+            cell, target = self.pass_target
+            there = math.hypot(ctx.vehicle.x - target.x, ctx.vehicle.y - target.y) < PASS_PROBE_REACHED_M
+            if cell == ctx.goal and not there and not passed_upflow:
+                return (target,)
+            self.pass_target = None
+        if routing.reach.goal_for(ctx.cell, ctx.goal) != ctx.cell:
+            return None
+        point = self._pass_point(ctx, frame, passed_upflow)
+        if point is not None:
+            self.pass_target = (ctx.goal, point)
+            return (point,)
+        probe = self._upflow_neighbour(ctx.cell, frame)
+        if probe is None:
+            probe = self.detour = self._upflow_beyond(ctx.cell, frame, routing.reach)
+        return None if probe is None else routing.to_cell(ctx, probe)
+
+    def _pass_point(self, ctx: PlanContext, frame: FlowFrame | None, passed_upflow: bool) -> Waypoint | None:
+        """The point just beyond the upflow pass of the estimate, if the pass is still to be made
+        and the leg there is clear; else None (the cell probe)."""
+        if self.upflow_pass_m <= 0.0 or frame is None or passed_upflow:
+            return None
+        cx, cy = self.grid.centre(ctx.goal)
+        d = self.upflow_pass_m + PASS_PROBE_MARGIN_M
+        target = Waypoint(cx - d * frame.ux, cy - d * frame.uy)
+        if not self.grid.contains(target.x, target.y):
+            return None
+        if not segment_clear(self.grid, (ctx.vehicle.x, ctx.vehicle.y), (target.x, target.y)):
+            return None
+        return target
+
+    def _upflow_neighbour(self, cell: int, frame: FlowFrame | None) -> int | None:
+        """The free neighbour of ``cell`` most nearly upflow (against the mean flow), if any."""
+        if frame is None:
+            return None
+        grid = self.grid
+        row, col = grid.row_col(cell)
+        cx, cy = grid.centre(cell)
+        best, best_cos = None, 0.0
+        for d_row, d_col in UPFLOW_PROBES:
+            r, c = row + d_row, col + d_col
+            if not (0 <= r < grid.rows and 0 <= c < grid.columns):
+                continue
+            neighbour = r * grid.columns + c
+            if grid.obstacle_mask.flat[neighbour]:
+                continue
+            nx, ny = grid.centre(neighbour)
+            dx, dy = nx - cx, ny - cy
+            cos = -(dx * frame.ux + dy * frame.uy) / math.hypot(dx, dy)
+            if cos > best_cos + 1e-9:
+                best, best_cos = neighbour, cos
+        return best
+
+    def _upflow_beyond(self, cell: int, frame: FlowFrame | None, reach: Reachability) -> int | None:
+        """The first free cell reachable from ``cell`` on the line upflow of its centre, if any.
+
+        Used when every upflow neighbour is blocked (the vehicle stands against the downflow face
+        of an obstacle): the plume may cross the obstacle, and only a look beyond it tells a
+        source behind it from one in the vehicle's cell."""
+        if frame is None:
+            return None
+        grid = self.grid
+        reachable = reach.reachable(cell)
+        cx, cy = grid.centre(cell)
+        step_m = 0.5 * min(grid.cell_width_m, grid.cell_height_m)
+        distance_m = step_m
+        while True:
+            x, y = cx - distance_m * frame.ux, cy - distance_m * frame.uy
+            if not grid.contains(x, y):
+                return None
+            candidate = grid.cell_of(x, y)
+            if candidate != cell and reachable.flat[candidate]:
+                return candidate
+            distance_m += step_m
+
+
+class Declaring:
+    """Judges each tick whether the source may be declared: the rules (``Declarer``, armed at the
+    first detection), then the check across the flow or the steady odour that vouches for the
+    cell. Owns the check and the probe at the estimate, the waypoints the declaration asks for.
+
+    ``admit``: the declarer's filter of the cells it may name (``Declarer``; benchmarks only)."""
+
+    def __init__(self, grid: Grid, config: DeclarationConfig, admit: Callable[[int], bool] | None) -> None:
+        self.grid = grid
+        self.config = config
+        self._declarer = Declarer(grid, config, admit)
+        self.check: Check | None = None  # the upflow check of a cell about to be declared
+        self.probe = EstimateProbe(grid, config.upflow_pass_m)
+        self._recent: deque[Observation] = deque()  # the last ticks, for steady_odour
+        self._first_odour_s: float | None = None  # the mission's first detection (this run)
+
+    @property
+    def armed(self) -> bool:
+        return self._declarer.armed
+
+    def arm(self, time_s: float, likelihood: FloatArray) -> None:
+        """Start judging (``Declarer.arm``): at the first detection, or on a restored map."""
+        self._declarer.arm(time_s, likelihood)
+
+    def remember(self, obs: Observation) -> None:
+        """Keep this tick for ``steady_odour`` (only while the steady-odour test is enabled)."""
+        if obs.detected and self._first_odour_s is None:
+            self._first_odour_s = obs.time_s
+        c = self.config
+        if c.steady_hit_rate <= 0.0:
+            return
+        self._recent.append(obs)
+        keep_s = max(c.steady_window_s, c.steady_turn_window_s)
+        while self._recent and self._recent[0].time_s <= obs.time_s - keep_s:
+            self._recent.popleft()
+
+    def recheck(self, obs: Observation, likelihood: FloatArray) -> bool:
+        """Call the check off if this tick's odour or estimate says so; whether it was."""
+        if self.check is None or self.check.holds(obs, int(np.argmax(likelihood))):
+            return False
+        self.check = None
+        return True
+
+    def reset(self) -> None:
+        """A new mission state: no check, no probe detour (a pass probe stays while it applies)."""
+        self.check = None
+        self.probe.detour = None
+
+    def judge(
+        self, obs: Observation, likelihood: FloatArray, frame: FlowFrame | None
+    ) -> SourceDeclared | Check | None:
+        """The declaration of this tick; or the check just started to vouch for a cell whose rule
+        fired (its legs are to be flown); None while there is neither."""
+        if not self._declarer.armed:
+            return None
+        t = obs.time_s
+        flow = None if frame is None else (frame.ux, frame.uy)
+        found = self._declarer.update(t, likelihood, (obs.x, obs.y), flow, obs.detected)
+        if self.check is not None and self.check.done:
+            # flown with no odour upflow: the rule fired at the estimate when the check began
+            cell = self.check.cell
+            flown = replace(
+                self.check.found,
+                time_s=t,
+                probability=float(likelihood.flat[cell]),
+                mass=mass_within(self.grid, likelihood, cell, self.config.radius_m),
+            )
+            return self._declared(t, flown, CrossCheck.FLOWN)
+        if found is None:
+            return None
+        vouched = self._vouch(found, frame)
+        return self._declared(t, found, vouched) if isinstance(vouched, CrossCheck) else vouched
+
+    def waypoints(
+        self, ctx: PlanContext, routing: Routing, frame: FlowFrame | None
+    ) -> tuple[Waypoint, ...] | None:
+        """The check's legs while it is flown, else the probe's at the estimate; None: neither."""
+        if self.check is not None and not self.check.done:
+            return self.check.waypoints(ctx, routing)
+        return self.probe.waypoints(ctx, routing, frame, self._declarer.passed_upflow)
+
+    def _vouch(self, found: Declaration, frame: FlowFrame | None) -> CrossCheck | Check | None:
+        """How ``found`` may be declared now without the upflow check (off, or steady odour); else
+        the check of its cell, started now, or None while it goes on."""
+        c = self.config
+        if c.check_width_m <= 0.0 or frame is None:
+            return CrossCheck.OFF
+        if self.check is not None and self.check.cell == found.cell:
+            return None
+        if steady_odour(self._recent, found.x, found.y, self._first_odour_s, (frame.ux, frame.uy), c):
+            return CrossCheck.STEADY  # a source, not a plume swung over it
+        self.check = Check.across(self.grid, found, frame, c)
+        self.probe.detour = None
+        return self.check
+
+    @staticmethod
+    def _declared(t: float, found: Declaration, check: CrossCheck) -> SourceDeclared:
+        return SourceDeclared(
+            time_s=t,
+            x=found.x,
+            y=found.y,
+            cell=found.paper_cell,
+            probability=found.probability,
+            mass=found.mass,
+            rules=found.rules,
+            check=check,
+        )

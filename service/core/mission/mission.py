@@ -1,0 +1,264 @@
+"""The mission state machine: find the plume, trace it, recover it, declare the source.
+
+Seed pomdp-astar §II-A: a search "can be divided into three phases, namely plume finding, plume
+tracing, and source declaration". The states, each flown by its own behaviour:
+
+- ``FIND`` (published as ``search``): no detection yet; a zigzag sweep across the flow
+  (``Sweep``).
+- ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate; the
+  declaration's legs (``Declaring``: the check across the flow, the probe upflow at the
+  estimate) go first.
+- ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
+  last detection (``Cast``), then the planner again. A detection returns to ``TRACE``.
+  With ``flat_map_ratio`` > 0, a cast that ends with a map holding no evidence goes back to
+  ``FIND``: a new sweep from where the vehicle is.
+  With ``lone_contact_hits`` > 0, a contact the sweep met with at most that many detections is
+  lost after ``lone_contact_lost_after_s`` instead, and goes back to ``FIND``, on along the sweep
+  from where it stopped: a false alarm (the detector's, or a stray puff) is not worth a cast,
+  and the sweep crosses the flow again anyway.
+  With ``lost_trace_mass`` > 0, while the estimate holds that share of the map the vehicle goes
+  on tracing instead of casting.
+- ``DECLARED``: a declaration rule fired and its cell was vouched for (``Declaring``); the
+  vehicle holds. Rules are only judged after the first detection: before it a flat map's argmax
+  never moves.
+
+The transitions are ``transitions.TRANSITIONS``. A check across the flow takes over the pattern
+of the state it starts in (the sweep's or the cast's) and leaves none when called off; only the
+trace flies it to its end, so one started while sweeping (after a lone contact) is flown by the
+sweep as its own legs.
+
+``Mission.step`` is pure: its inputs are this tick's observation (whose ``time_s`` is the only
+clock) and the vehicle state; it updates the mapper it was given and returns the waypoints to fly
+(``None``: keep flying the last ones) and the events of the tick. Every waypoint it returns comes
+out of ``Emitter``, which passes it through ``planning.safety.safe_plan``: inside the search area,
+outside every obstacle, no leg across an obstacle. When the estimate cannot be reached, the
+planner aims at the nearest reachable cell instead; when a planner still finds no path
+(``NoPathError``), the obstacle-free A* takes over; when nothing can be planned, the vehicle holds.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from service.core.config import DeclarationConfig, PlanningConfig
+from service.core.mission.cast import Cast
+from service.core.mission.declaring import Check, Declaring
+from service.core.mission.emitter import Emitter
+from service.core.mission.events import (
+    MissionEvent,
+    MissionOutput,
+    MissionState,
+    PlumeFound,
+    PlumeLost,
+    SourceDeclared,
+)
+from service.core.mission.pattern import Pattern
+from service.core.mission.routing import Routing
+from service.core.mission.sweep import Sweep
+from service.core.mission.transitions import TRANSITIONS, Cue
+from service.core.planning import make_planner
+from service.core.planning.base import PlanContext, Waypoint
+from service.core.planning.crossflow import FlowFrame
+from service.core.planning.safety import clamped_cell
+
+if TYPE_CHECKING:
+    from service.core.config import Config
+    from service.core.grid import Grid
+    from service.core.mapping.mapper import SourceMapper
+    from service.core.observation import Observation
+    from service.core.planning.base import Planner, VehicleState
+
+
+class Mission:
+    """One search mission over ``grid`` with ``mapper``; call ``step`` once per tick."""
+
+    def __init__(
+        self,
+        grid: Grid,
+        mapper: SourceMapper,
+        planning: PlanningConfig | None = None,
+        declaration: DeclarationConfig | None = None,
+        *,
+        planner: Planner | None = None,
+        admit: Callable[[int], bool] | None = None,
+    ) -> None:
+        """``admit``: the declarer's filter of the cells it may name (``Declarer``; benchmarks only)."""
+        if mapper.grid != grid:
+            raise ValueError("the mapper works on a different grid")
+        self.grid = grid
+        self.mapper = mapper
+        self.planning = planning or PlanningConfig()
+        self.planner = planner if planner is not None else make_planner(grid, self.planning)
+        self._routing = Routing.of(grid, self.planning)
+        decl = (declaration or DeclarationConfig()).for_mapper(mapper.name)
+        self._declaring = Declaring(grid, decl, admit)
+        self._sweep = Sweep(grid, self.planning)
+        self._cast = Cast(grid, self.planning, self.planner.steers_by_map, decl.radius_m)
+        self._emitter = Emitter(grid)
+        self._state = MissionState.FIND
+        self._last_time: float | None = None
+        self._last_detection: tuple[float, float, float] | None = None  # (t, x, y)
+        self._sweep_hits: int | None = None  # detections since a contact paused the sweep
+        self._frame: FlowFrame | None = None  # the mean flow's direction
+
+    @classmethod
+    def from_config(
+        cls, config: Config, grid: Grid, mapper: SourceMapper, *, admit: Callable[[int], bool] | None = None
+    ) -> Mission:
+        return cls(grid, mapper, config.planning, config.declaration, admit=admit)
+
+    @property
+    def state(self) -> MissionState:
+        return self._state
+
+    def save_state(self) -> dict[str, float | str | None]:
+        """The phase and detection memory (for the restart snapshot; the mapper saves its own)."""
+        detection = self._last_detection
+        return {
+            "phase": str(self._state),
+            "last_time": self._last_time,
+            "last_detection_t": None if detection is None else detection[0],
+            "last_detection_x": None if detection is None else detection[1],
+            "last_detection_y": None if detection is None else detection[2],
+        }
+
+    def restore_state(self, state: dict[str, Any]) -> None:
+        """Continue in the phase ``save_state`` saved; a sweep or cast pattern is laid out anew,
+        and past the first detection the declaration rules are re-armed from the restored map.
+        The steady-odour record is not saved: it starts afresh, so no check is skipped until it
+        has filled again (``steady_min_contact_s`` after the next odour)."""
+        phase = MissionState(state["phase"])
+        self._last_time = None if state["last_time"] is None else float(state["last_time"])
+        t = state["last_detection_t"]
+        x, y = state["last_detection_x"], state["last_detection_y"]
+        self._last_detection = None if t is None else (float(t), float(x), float(y))
+        self._state = phase
+        if phase is not MissionState.FIND and self._last_time is not None:
+            self._declaring.arm(self._last_time, self.mapper.likelihood)
+
+    def step(self, obs: Observation, vehicle: VehicleState) -> MissionOutput:
+        """Fuse this tick's observation, move the state machine on, and plan."""
+        if self._last_time is not None and obs.time_s <= self._last_time:
+            # a repeated or out-of-order tick changes nothing (the mapper would ignore it too)
+            return MissionOutput(obs.time_s, self._state, None, (), self.mapper.estimate())
+        self._last_time = obs.time_s
+        self.mapper.update(obs)
+        self._update_mean_flow(obs)
+        self._declaring.remember(obs)
+        estimate = self.mapper.estimate()
+        events = self._advance(obs)
+        if self._state is MissionState.DECLARED:
+            declared_now = any(isinstance(e, SourceDeclared) for e in events)
+            waypoints = self._emitter.emit(vehicle, ()) if declared_now else None
+        else:
+            ctx = PlanContext(
+                vehicle=vehicle,
+                cell=clamped_cell(self.grid, vehicle.x, vehicle.y),
+                goal=self.grid.flat_index(estimate.cell),
+                mapper=self.mapper,
+            )
+            waypoints = self._emitter.emit(vehicle, self._BEHAVIOUR[self._state](self, ctx))
+        return MissionOutput(obs.time_s, self._state, waypoints, tuple(events), estimate)
+
+    def _update_mean_flow(self, obs: Observation) -> None:
+        """The direction (``_frame``) of the mean flow over the mapper's flow history (this tick's
+        flow before there is any): turbulent noise on single ticks must not turn the sweep around."""
+        history = self.mapper.history
+        dx = sum(step.dx_m for step in history) if history else obs.flow_x
+        dy = sum(step.dy_m for step in history) if history else obs.flow_y
+        self._frame = FlowFrame.from_flow(dx, dy, self._frame)
+
+    # -- state machine -------------------------------------------------------------------------
+
+    def _advance(self, obs: Observation) -> list[MissionEvent]:
+        """This tick's events, each taking the transition it cues."""
+        if self._state is MissionState.DECLARED:
+            return []
+        events: list[MissionEvent] = []
+        t = obs.time_s
+        if self._declaring.recheck(obs, self.mapper.likelihood):
+            self._take_over(())
+        if obs.detected:
+            if self._state is not MissionState.TRACE:
+                first = self._state is MissionState.FIND and not self._declaring.armed
+                events.append(PlumeFound(t, obs.x, obs.y, first=first))
+                if first:
+                    self._declaring.arm(t, self.mapper.likelihood)
+                self._go(Cue.ODOUR)
+            if self._sweep_hits is not None:
+                self._sweep_hits += 1
+            self._last_detection = (t, obs.x, obs.y)
+        elif (cue := self._quiet(t)) is not None and self._last_detection is not None:
+            t_last, x_last, y_last = self._last_detection
+            events.append(PlumeLost(t, x_last, y_last, t_last))
+            self._go(cue)
+        verdict = self._declaring.judge(obs, self.mapper.likelihood, self._frame)
+        if isinstance(verdict, Check):
+            self._take_over(verdict.pattern.vertices)
+        elif verdict is not None:
+            events.append(verdict)
+            self._go(Cue.SOURCE)
+        return events
+
+    def _quiet(self, t: float) -> Cue | None:
+        """Whether tracing has gone without odour long enough to be lost: ``LONE_QUIET`` after a
+        lone contact of the sweep, ``QUIET`` otherwise; never while a check is flown."""
+        if self._state is not MissionState.TRACE or self._last_detection is None:
+            return None
+        p = self.planning
+        lone = self._sweep_hits is not None and self._sweep_hits <= p.lone_contact_hits
+        wait = p.lone_contact_lost_after_s if lone else p.lost_after_s
+        if t - self._last_detection[0] < wait or self._declaring.check is not None:
+            return None
+        return Cue.LONE_QUIET if lone else Cue.QUIET
+
+    def _go(self, cue: Cue) -> None:
+        """Take ``cue``'s transition (``TRANSITIONS``) and its entry actions. A check or a probe
+        detour ends with the state it began in; a contact from the sweep pauses the sweep (its
+        pattern is kept for ``LONE_QUIET``)."""
+        from_find = self._state is MissionState.FIND
+        self._state = TRANSITIONS[self._state, cue]
+        self._declaring.reset()
+        self._sweep_hits = 0 if from_find and cue is Cue.ODOUR else None
+        if self._state is MissionState.LOST:
+            self._cast.lay(None if self._last_detection is None else self._last_detection[1:], self._frame)
+        elif cue is Cue.FLAT_CAST:
+            self._sweep.restart()
+
+    def _take_over(self, legs: tuple[Waypoint, ...]) -> None:
+        """Put ``legs`` in the place of this state's pattern (the sweep's or the cast's): a check
+        takes over the pattern of the state it starts in, and leaves none when called off."""
+        if self._state is MissionState.FIND:
+            self._sweep.pattern = Pattern(legs)
+        elif self._state is MissionState.LOST:
+            self._cast.pattern = Pattern(legs)
+
+    # -- behaviours: the waypoints each state wants, before the safety rule -------------------
+
+    def _find(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
+        return self._sweep.waypoints(ctx, self._frame, self._routing)
+
+    def _trace(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
+        wanted = self._declaring.waypoints(ctx, self._routing, self._frame)
+        return self._routing.route(self.planner, ctx) if wanted is None else wanted
+
+    def _lost(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
+        likelihood = self.mapper.likelihood
+        if self._declaring.check is not None or self._cast.map_knows_the_plume(likelihood):
+            return self._trace(ctx)
+        wanted = self._cast.waypoints(ctx, self._routing)
+        if wanted is not None:
+            return wanted
+        if self._cast.map_is_flat(likelihood):
+            # the cast is over and the map holds no evidence: its estimate is merely the first of
+            # nearly equal cells, so look for the plume again as before the first detection
+            self._go(Cue.FLAT_CAST)
+            return self._find(ctx)
+        return self._trace(ctx)
+
+    _BEHAVIOUR: ClassVar[dict[MissionState, Callable[[Mission, PlanContext], tuple[Waypoint, ...]]]] = {
+        MissionState.FIND: _find,
+        MissionState.TRACE: _trace,
+        MissionState.LOST: _lost,
+    }

@@ -1,0 +1,43 @@
+"""A pattern: turning points flown in order, and how far along them the vehicle is.
+
+The sweep, the cast and the check each own one; the same rule flies them all."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from service.core.planning.safety import segment_clear
+
+if TYPE_CHECKING:
+    from service.core.mission.routing import Routing
+    from service.core.planning.base import PlanContext, Waypoint
+
+
+@dataclass
+class Pattern:
+    """Turning points (``vertices``) and the index of the next one not yet reached."""
+
+    vertices: tuple[Waypoint, ...] = ()
+    index: int = 0
+
+    def follow(self, ctx: PlanContext, routing: Routing) -> tuple[Waypoint, ...] | None:
+        """Waypoints to the next turning point not yet reached; None once all are reached. A
+        turning point that cannot be reached counts as reached at the nearest reachable cell."""
+        grid = routing.grid
+        while self.index < len(self.vertices):
+            vertex = self.vertices[self.index]
+            vertex_cell = grid.cell_of(vertex.x, vertex.y)
+            target = routing.reach.goal_for(ctx.cell, vertex_cell)
+            if target != ctx.cell:
+                # a vertex in a blocked cell (an obstacle rectangle may cover only part of a
+                # cell) would be refused by the safety rule: the route goes to its stand-in
+                straight = target == vertex_cell
+                if straight and segment_clear(grid, (ctx.vehicle.x, ctx.vehicle.y), (vertex.x, vertex.y)):
+                    # a clear leg is flown straight: A*'s cell staircase would put the diagonal
+                    # part of a sweep leg anywhere along it, and a leg that first runs along the
+                    # previous one sweeps nothing new
+                    return (vertex,)
+                return routing.to_cell(ctx, target)
+            self.index += 1
+        return None

@@ -1,0 +1,36 @@
+"""The mission's transitions: which cue moves it from which state to which (``TRANSITIONS``).
+
+A detection in ``TRACE`` and anything in ``DECLARED`` move nothing; the entry actions of each
+transition are ``Mission._go``'s."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from typing import Final
+
+from service.core.mission.events import MissionState
+
+
+class Cue(StrEnum):
+    """What moves the mission on."""
+
+    ODOUR = "odour"  # a detection
+    QUIET = "quiet"  # no detection for lost_after_s while tracing (and no check flown)
+    LONE_QUIET = "lone quiet"  # a contact of the sweep with at most lone_contact_hits detections,
+    # not repeated for lone_contact_lost_after_s: most likely a false alarm
+    FLAT_CAST = "flat cast"  # the cast is over and the map holds no evidence (flat_map_ratio)
+    SOURCE = "source"  # a declaration rule fired and its cell was vouched for
+
+
+FIND, TRACE, LOST, DECLARED = MissionState.FIND, MissionState.TRACE, MissionState.LOST, MissionState.DECLARED
+
+TRANSITIONS: Final[dict[tuple[MissionState, Cue], MissionState]] = {
+    (FIND, Cue.ODOUR): TRACE,  # the sweep pauses where it is
+    (LOST, Cue.ODOUR): TRACE,
+    (TRACE, Cue.QUIET): LOST,  # a cast around the last detection
+    (TRACE, Cue.LONE_QUIET): FIND,  # sweep on from where the contact paused it
+    (LOST, Cue.FLAT_CAST): FIND,  # a new sweep from where the vehicle is
+    (FIND, Cue.SOURCE): DECLARED,
+    (TRACE, Cue.SOURCE): DECLARED,
+    (LOST, Cue.SOURCE): DECLARED,
+}

@@ -1,0 +1,152 @@
+"""The declaration's mission side: the check across the flow (its legs and its call-off rule),
+the judgement that starts it and declares after it, and the probe upflow at the estimate."""
+
+import numpy as np
+
+from service.core.config import DeclarationConfig, DeclarationRule, PlanningConfig
+from service.core.grid import Grid
+from service.core.mapping.belief import FloatArray
+from service.core.mapping.hmm import HmmMapper
+from service.core.mission.declaring import PASS_PROBE_MARGIN_M, Check, Declaring, EstimateProbe
+from service.core.mission.events import CrossCheck, SourceDeclared
+from service.core.mission.routing import Routing
+from service.core.observation import Observation
+from service.core.planning.base import PlanContext, VehicleState, Waypoint
+from service.core.planning.crossflow import FlowFrame
+from service.core.planning.declaration import Declaration
+from service.core.planning.safety import clamped_cell
+
+AREA = Grid(0.0, 100.0, -50.0, 50.0, columns=20, rows=20)  # 5 m cells
+SOURCE = AREA.cell_of(22.0, 3.0)
+SX, SY = AREA.centre(SOURCE)
+EAST = FlowFrame(1.0, 0.0)
+CONFIG = DeclarationConfig(
+    rules=[DeclarationRule.MASS],
+    probability=0.8,
+    upflow_pass_m=0.0,
+    check_width_m=6.0,
+    check_upflow_m=3.0,
+    persist_s=0.0,
+    steady_hit_rate=0.0,
+)
+ROUTING = Routing.of(AREA, PlanningConfig())
+
+
+def peaked(cell: int = SOURCE, peak: float = 0.9) -> FloatArray:
+    pi = np.full(AREA.shape, (1.0 - peak) / (AREA.size - 1))
+    pi.flat[cell] = peak
+    return pi
+
+
+def ctx_at(x: float, y: float, goal: int = SOURCE) -> PlanContext:
+    return PlanContext(VehicleState(x, y, 0.0), clamped_cell(AREA, x, y), goal, HmmMapper(AREA))
+
+
+def odour(t: float, x: float, y: float, detected: bool = True) -> Observation:
+    return Observation(t, x, y, 1.0, 0.0, detected)
+
+
+def found_at_source() -> Declaration:
+    return Declaration(0.0, SOURCE, AREA.paper_number(SOURCE), SX, SY, 0.9, 0.9, (DeclarationRule.MASS,))
+
+
+# -- the check ----------------------------------------------------------------------------------
+
+
+def test_the_check_crosses_the_flow_upflow_of_the_cell() -> None:
+    check = Check.across(AREA, found_at_source(), EAST, CONFIG)
+    assert check.pattern.vertices == (Waypoint(SX - 3.0, SY + 6.0), Waypoint(SX - 3.0, SY - 6.0))
+    assert check.cancel_upflow_m == 1.5
+
+
+def test_odour_far_enough_upflow_or_another_estimate_calls_the_check_off() -> None:
+    check = Check.across(AREA, found_at_source(), EAST, CONFIG)
+    assert check.holds(odour(1.0, SX - 1.0, SY), SOURCE)  # odour nearer than 1.5 m upflow
+    assert check.holds(odour(1.0, SX + 4.0, SY), SOURCE)  # odour downflow
+    assert check.holds(odour(1.0, SX - 3.0, SY, detected=False), SOURCE)  # no odour
+    assert not check.holds(odour(1.0, SX - 1.5, SY), SOURCE)  # odour 1.5 m upflow
+    assert not check.holds(odour(1.0, SX + 4.0, SY), SOURCE + 1)  # another estimate
+
+
+def test_the_check_is_done_when_its_legs_are_flown_and_holds_there() -> None:
+    check = Check.across(AREA, found_at_source(), EAST, CONFIG)
+    assert check.waypoints(ctx_at(SX, SY), ROUTING) == (Waypoint(SX - 3.0, SY + 6.0),)
+    assert not check.done
+    assert check.waypoints(ctx_at(SX - 3.0, SY + 6.0), ROUTING) == (Waypoint(SX - 3.0, SY - 6.0),)
+    assert check.waypoints(ctx_at(SX - 3.0, SY - 6.0), ROUTING) == (Waypoint(SX - 3.0, SY - 6.0),)
+    assert check.done
+
+
+# -- the judgement ------------------------------------------------------------------------------
+
+
+def test_nothing_is_judged_before_the_rules_are_armed() -> None:
+    declaring = Declaring(AREA, CONFIG, None)
+    assert declaring.judge(odour(0.0, SX, SY), peaked(), EAST) is None
+    assert declaring.check is None
+
+
+def test_without_a_check_a_rule_that_fires_is_declared_at_once() -> None:
+    declaring = Declaring(AREA, CONFIG.model_copy(update={"check_width_m": 0.0}), None)
+    declaring.arm(0.0, peaked())
+    verdict = declaring.judge(odour(0.0, SX, SY), peaked(), EAST)
+    assert isinstance(verdict, SourceDeclared)
+    assert verdict.check is CrossCheck.OFF
+    assert (verdict.x, verdict.y, verdict.cell) == (SX, SY, AREA.paper_number(SOURCE))
+
+
+def test_a_rule_that_fires_starts_the_check_and_the_cell_is_declared_once_it_is_flown() -> None:
+    declaring = Declaring(AREA, CONFIG, None)
+    declaring.arm(0.0, peaked())
+    check = declaring.judge(odour(0.0, SX, SY), peaked(), EAST)
+    assert isinstance(check, Check)
+    assert declaring.check is check
+    assert declaring.judge(odour(1.0, SX, SY, detected=False), peaked(), EAST) is None  # goes on
+    check.done = True
+    verdict = declaring.judge(odour(2.0, SX - 3.0, SY - 6.0, detected=False), peaked(peak=0.85), EAST)
+    assert isinstance(verdict, SourceDeclared)
+    assert verdict.check is CrossCheck.FLOWN
+    assert (verdict.time_s, verdict.x, verdict.y, verdict.probability) == (2.0, SX, SY, 0.85)
+
+
+def test_recheck_calls_the_check_off_when_the_estimate_moves() -> None:
+    declaring = Declaring(AREA, CONFIG, None)
+    declaring.arm(0.0, peaked())
+    assert isinstance(declaring.judge(odour(0.0, SX, SY), peaked(), EAST), Check)
+    assert not declaring.recheck(odour(1.0, SX, SY, detected=False), peaked())
+    assert declaring.check is not None
+    assert declaring.recheck(odour(2.0, SX, SY, detected=False), peaked(SOURCE + 1))
+    assert declaring.check is None
+
+
+def test_the_check_legs_go_before_the_probe() -> None:
+    declaring = Declaring(AREA, CONFIG, None)
+    declaring.arm(0.0, peaked())
+    declaring.judge(odour(0.0, SX, SY), peaked(), EAST)
+    assert declaring.waypoints(ctx_at(SX, SY), ROUTING, EAST) == (Waypoint(SX - 3.0, SY + 6.0),)
+
+
+# -- the probe at the estimate ------------------------------------------------------------------
+
+
+def test_at_the_estimate_the_probe_goes_to_the_cell_upflow() -> None:
+    probe = EstimateProbe(AREA, upflow_pass_m=0.0)
+    waypoints = probe.waypoints(ctx_at(SX, SY), ROUTING, EAST, passed_upflow=False)
+    assert waypoints is not None
+    assert AREA.cell_of(waypoints[-1].x, waypoints[-1].y) == SOURCE - 1  # the West neighbour
+    assert probe.waypoints(ctx_at(SX + 20.0, SY), ROUTING, EAST, passed_upflow=False) is None  # not there
+
+
+def test_the_pass_probe_flies_just_beyond_the_upflow_pass_until_it_is_made() -> None:
+    probe = EstimateProbe(AREA, upflow_pass_m=2.0)
+    target = Waypoint(SX - 2.0 - PASS_PROBE_MARGIN_M, SY)
+    assert probe.waypoints(ctx_at(SX, SY), ROUTING, EAST, passed_upflow=False) == (target,)
+    assert probe.waypoints(ctx_at(SX - 1.0, SY), ROUTING, EAST, passed_upflow=False) == (target,)
+    assert probe.pass_target == (SOURCE, target)
+    probe.waypoints(ctx_at(SX - 1.0, SY), ROUTING, EAST, passed_upflow=True)
+    assert probe.pass_target is None
+
+
+def test_no_probe_without_a_flow() -> None:
+    probe = EstimateProbe(AREA, upflow_pass_m=2.0)
+    assert probe.waypoints(ctx_at(SX, SY), ROUTING, None, passed_upflow=False) is None
