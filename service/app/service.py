@@ -382,8 +382,7 @@ class Service:
             name, text = "plume_lost", f"OSLIM plume lost at {event.x:.1f},{event.y:.1f}"
         else:
             self.declared = event
-            rules = "+".join(str(r) for r in event.rules)
-            name, text = "source_declared", f"OSLIM source at {event.x:.1f},{event.y:.1f} ({rules})"
+            name, text = "source_declared", f"OSLIM source at {event.x:.1f},{event.y:.1f} ({event.mass:.0%})"
         # the log and the recording also say how the cell was checked; STATUSTEXT carries 50 characters
         detail = text if not isinstance(event, SourceDeclared) else f"{text}, check {event.check}"
         log.info("%s (t=%.1f s)", detail, event.time_s)

@@ -10,9 +10,9 @@ import tomllib
 from collections.abc import Sequence
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated, Any, Self
+from typing import Any, Self
 
-from pydantic import BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from service.core.errors import ConfigError
 
@@ -124,7 +124,6 @@ class PlanningMethod(StrEnum):
     MLDP = "mldp"
     MLDP_PATH = "mldp-path"
     APF = "apf"
-    SURGE_CAST = "surge-cast"
 
 
 class PlanningConfig(_Section):
@@ -142,34 +141,21 @@ class PlanningConfig(_Section):
     cast_legs: int = Field(default=4, ge=0, le=100)
     lost_trace_mass: float = Field(default=0.2, ge=0, le=1)
     """Plume lost with this share of the map within ``declaration.radius_m`` of the estimate: go
-    on tracing toward the estimate instead of casting (0: always cast; surge-cast always casts)."""
+    on tracing toward the estimate instead of casting (0: always cast)."""
     lost_after_s: float = Field(default=30.0, gt=0)
     flat_map_ratio: float = Field(default=2.0, ge=0)
     """A map whose most likely cell holds less than this many times a uniform map's share has no
     evidence left of where the source is: a cast that ends with such a map sweeps again instead of
-    heading for the map's estimate, an arbitrary cell (0: off; surge-cast never sweeps again)."""
+    heading for the map's estimate, an arbitrary cell (0: off)."""
     lone_contact_hits: int = Field(default=1, ge=0, le=1000)
     """A contact the sweep met with at most this many detections, then lost for
     ``lone_contact_lost_after_s``, goes back to the sweep where it stopped instead of casting
     (0: always cast)."""
     lone_contact_lost_after_s: float = Field(default=5.0, gt=0)
     """How long a lone contact (``lone_contact_hits``) waits for another detection, s."""
-    surge_step_m: float = Field(default=5.0, gt=0)
-
-
-class DeclarationRule(StrEnum):
-    """How the source gets declared: the seed's stable estimate, or the mass near the estimate."""
-
-    STABLE = "stable"
-    MASS = "mass"
 
 
 class DeclarationConfig(_Section):
-    # TOML gives strings: the items (not only the list) must accept them
-    rules: list[Annotated[DeclarationRule, Strict(False)]] = Field(
-        default_factory=lambda: [DeclarationRule.MASS], min_length=1
-    )
-    stable_s: float = Field(default=30.0, gt=0)
     probability: float = Field(default=0.95, gt=0, le=1)
     hmm_probability: float = Field(default=0.25, gt=0, le=1)
     """The mass rule's threshold with the hmm mapper: its pi is adapted by the gains of seed

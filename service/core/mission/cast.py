@@ -28,12 +28,10 @@ if TYPE_CHECKING:
 
 @dataclass
 class Cast:
-    """The cast's legs (``pattern``). ``steers_by_map``: the planner's (the map-free baseline
-    casts whatever the map says); ``radius_m``: the declaration's, for ``lost_trace_mass``."""
+    """The cast's legs (``pattern``); ``radius_m``: the declaration's, for ``lost_trace_mass``."""
 
     grid: Grid
     planning: PlanningConfig
-    steers_by_map: bool
     radius_m: float
     pattern: Pattern = field(default_factory=Pattern)
 
@@ -51,9 +49,9 @@ class Cast:
 
     def map_is_flat(self, likelihood: FloatArray) -> bool:
         """Whether no cell holds ``flat_map_ratio`` times a uniform map's share (always False with
-        the ratio 0, and for the map-free baseline)."""
+        the ratio 0)."""
         ratio = self.planning.flat_map_ratio
-        if ratio <= 0.0 or not self.steers_by_map:
+        if ratio <= 0.0:
             return False
         total = float(likelihood.sum())
         return total > 0.0 and float(likelihood.max()) * likelihood.size < ratio * total
@@ -64,7 +62,7 @@ class Cast:
         has its estimate near the source, where a cast through the last detection, often just
         upflow of the source, crosses the flow where the plume is not."""
         share = self.planning.lost_trace_mass
-        if share <= 0.0 or not self.steers_by_map:
-            return False  # the map-free baseline casts whatever the map says
+        if share <= 0.0:
+            return False
         cell = int(np.argmax(likelihood))
         return mass_within(self.grid, likelihood, cell, self.radius_m) >= share

@@ -1,5 +1,5 @@
-"""The mission's side of the declaration: arming the rules, the check across the flow, the
-steady-odour record and the probe upflow at the estimate. The rules themselves are
+"""The mission's side of the declaration: arming the rule, the check across the flow, the
+steady-odour record and the probe upflow at the estimate. The rule itself is
 ``planning.declaration``'s (``Declarer``).
 
 With ``declaration.check_width_m`` > 0 a rule that fires first sends the vehicle across the flow
@@ -194,7 +194,7 @@ class EstimateProbe:
 
 
 class Declaring:
-    """Judges each tick whether the source may be declared: the rules (``Declarer``, armed at the
+    """Judges each tick whether the source may be declared: the rule (``Declarer``, armed at the
     first detection), then the check across the flow or the steady odour that vouches for the
     cell. Owns the check and the probe at the estimate, the waypoints the declaration asks for.
 
@@ -297,6 +297,5 @@ class Declaring:
             cell=found.paper_cell,
             probability=found.probability,
             mass=found.mass,
-            rules=found.rules,
             check=check,
         )

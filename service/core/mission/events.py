@@ -6,8 +6,6 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import TYPE_CHECKING
 
-from service.core.config import DeclarationRule
-
 if TYPE_CHECKING:
     from service.core.mapping.mapper import Estimate
     from service.core.planning.base import Waypoint
@@ -53,8 +51,8 @@ class CrossCheck(StrEnum):
 
 @dataclass(frozen=True)
 class SourceDeclared:
-    """The source is declared in the papers' cell ``cell`` centred on (x, y); ``rules`` fired;
-    ``check``: how the check across the flow vouched for it."""
+    """The source is declared in the papers' cell ``cell`` centred on (x, y); ``check``: how the
+    check across the flow vouched for it."""
 
     time_s: float
     x: float
@@ -62,7 +60,6 @@ class SourceDeclared:
     cell: int
     probability: float
     mass: float
-    rules: tuple[DeclarationRule, ...]
     check: CrossCheck = CrossCheck.OFF
 
 

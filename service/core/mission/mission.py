@@ -94,7 +94,7 @@ class Mission:
         decl = (declaration or DeclarationConfig()).for_mapper(mapper.name)
         self._declaring = Declaring(grid, decl, admit)
         self._sweep = Sweep(grid, self.planning)
-        self._cast = Cast(grid, self.planning, self.planner.steers_by_map, decl.radius_m)
+        self._cast = Cast(grid, self.planning, decl.radius_m)
         self._emitter = Emitter(grid)
         self._state = MissionState.FIND
         self._last_time: float | None = None
@@ -125,7 +125,7 @@ class Mission:
 
     def restore_state(self, state: dict[str, Any]) -> None:
         """Continue in the phase ``save_state`` saved; a sweep or cast pattern is laid out anew,
-        and past the first detection the declaration rules are re-armed from the restored map.
+        and past the first detection the declaration rule is re-armed from the restored map.
         The steady-odour record is not saved: it starts afresh, so no check is skipped until it
         has filled again (``steady_min_contact_s`` after the next odour)."""
         phase = MissionState(state["phase"])

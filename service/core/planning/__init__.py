@@ -13,7 +13,6 @@ from service.core.planning.apf import ApfPlanner
 from service.core.planning.astar import AStarPlanner, PaperAStarPlanner
 from service.core.planning.base import Plan, PlanContext, Planner, PlannerFactory, VehicleState, Waypoint
 from service.core.planning.mldp import MldpPathPlanner, MldpPlanner
-from service.core.planning.surge_cast import SurgeCastPlanner
 
 if TYPE_CHECKING:
     from service.core.config import PlanningConfig
@@ -25,7 +24,6 @@ PLANNERS: dict[str, PlannerFactory] = {
     MldpPlanner.name: MldpPlanner,
     MldpPathPlanner.name: MldpPathPlanner,
     ApfPlanner.name: ApfPlanner,
-    SurgeCastPlanner.name: SurgeCastPlanner,
 }
 
 

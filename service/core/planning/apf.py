@@ -110,7 +110,6 @@ class ApfPlanner:
     point or the leg to it is not safe, the admissible neighbour cell best aligned with F."""
 
     name: ClassVar[str] = "apf"
-    steers_by_map: ClassVar[bool] = True
 
     def __init__(self, grid: Grid, config: PlanningConfig) -> None:
         self.grid = grid

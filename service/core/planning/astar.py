@@ -189,7 +189,6 @@ class AStarPlanner(PathFollower):
     """``astar``: the obstacle-free 8-connected A* to the estimate, re-planned when it changes."""
 
     name: ClassVar[str] = "astar"
-    steers_by_map: ClassVar[bool] = True
 
     def compute(self, ctx: PlanContext) -> list[int]:
         return astar(self.grid, ctx.cell, ctx.goal, self.blocked)
@@ -199,7 +198,6 @@ class PaperAStarPlanner(PathFollower):
     """``astar-paper``: seed pomdp-astar §II-D as printed (five moves, cost 1000, Manhattan)."""
 
     name: ClassVar[str] = "astar-paper"
-    steers_by_map: ClassVar[bool] = True
 
     def compute(self, ctx: PlanContext) -> list[int]:
         sector = heading_sector(ctx.vehicle.heading_rad)

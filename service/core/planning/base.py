@@ -94,9 +94,6 @@ class Planner(Protocol):
     ``plan`` raises ``NoPathError`` when it has no admissible path to ``ctx.goal``."""
 
     name: ClassVar[str]
-    steers_by_map: ClassVar[bool]
-    """Whether the planner steers toward the map's estimate; the mission leaves a map-free one's
-    own behaviour (the surge-cast baseline's cast) alone."""
 
     def plan(self, ctx: PlanContext) -> Plan: ...
 

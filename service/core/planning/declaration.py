@@ -1,17 +1,12 @@
 """Source declaration: when the mission stops and names the source cell.
 
-Two rules, each enabled by ``declaration.rules``:
+The rule: at least ``probability`` of the map's mass lies in cells whose centres are within
+``radius_m`` of the estimated cell's centre. Seed pomdp-astar §II-D declares instead when "the
+estimated source location produced from the source likelihood map does not change over 30
+seconds"; that rule was measured on the world suite and deleted (docs/search-benchmark.md): it
+waits out a map that is already sure and declares a flat map whose argmax happens not to move.
 
-``stable`` (seed pomdp-astar §II-D): "The chemical source is declared to be found if the source
-likelihood map converges, i.e., the estimated source location produced from the source
-likelihood map does not change over 30 seconds" (``stable_s``).
-
-``mass``: at least ``probability`` of the map's mass lies in cells whose centres are within
-``radius_m`` of the estimated cell's centre. Unlike the stable rule it looks at how peaked the
-map is, so it neither waits out a map that is already sure nor declares a flat map whose argmax
-happens not to move.
-
-Both rules are gated by a visit: a rule only fires while the vehicle is within
+The rule is gated by a visit: it only fires while the vehicle is within
 ``visit_radius_m`` of the estimated cell's centre (when the mission passes the vehicle's
 position). A map fed only by detections far downflow is peaked across the flow but not along
 it: every cell upflow of the detections within the flow-history window explains them, and the
@@ -19,7 +14,7 @@ argmax can sit still, or gather mass, anywhere along that line. Only observation
 estimate itself (odour just downflow of a true source, none just upflow of it) tell the cells
 of that line apart, so the vehicle has to have reached the estimate before it is named.
 
-With ``upflow_pass_m`` > 0 a rule also waits until the vehicle has been at least that far upflow
+With ``upflow_pass_m`` > 0 the rule also waits until the vehicle has been at least that far upflow
 of the estimated cell's centre (along the mean flow, and within ``visit_radius_m`` of the line
 through the centre across it) since that cell became the estimate. Odour at the estimate is
 explained as well by a source there as by any source upflow; in a flow that varies in space the
@@ -29,7 +24,7 @@ upflow tells them apart: odour there moves the estimate on (and restarts the wai
 leaves it. The mission's trace behaviour probes the upflow neighbour whenever the vehicle is at
 the estimate, so the pass comes without a change of planner.
 
-With ``persist_s`` > 0 no rule fires until odour has been detected within ``visit_radius_m`` of
+With ``persist_s`` > 0 the rule does not fire until odour has been detected within ``visit_radius_m`` of
 the estimated cell's centre at two times at least ``persist_s`` apart. A source keeps releasing
 where it is, so odour comes back to it however the plume meanders; where a meandering plume has
 swung away, odour was there only while it passed. The guard does not depend on how the vehicle
@@ -56,8 +51,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from service.core.config import DeclarationRule
-
 if TYPE_CHECKING:
     from service.core.config import DeclarationConfig
     from service.core.grid import Grid
@@ -67,8 +60,8 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Declaration:
-    """A declared source: the flat cell, the papers' cell number, its centre, its likelihood, the
-    mass within the radius, and every rule that fired (in configuration order)."""
+    """A declared source: the flat cell, the papers' cell number, its centre, its likelihood and
+    the mass within the radius."""
 
     time_s: float
     cell: int
@@ -77,11 +70,6 @@ class Declaration:
     y: float
     probability: float
     mass: float
-    rules: tuple[DeclarationRule, ...]
-
-    def __post_init__(self) -> None:
-        if not self.rules:
-            raise ValueError("a declaration names at least one rule")
 
 
 def steady_odour(
@@ -132,9 +120,9 @@ def mass_within(grid: Grid, likelihood: FloatArray, cell: int, radius_m: float) 
 
 
 class Declarer:
-    """Keeps the stable rule's clock and checks both rules once per tick after ``arm``.
+    """Judges the rule once per tick after ``arm``.
 
-    ``admit`` (flat cell -> bool), when given, is asked last: a rule that fires for a cell it
+    ``admit`` (flat cell -> bool), when given, is asked last: the rule firing for a cell it
     refuses is ignored. The benchmark's perfect guard (``oslim bench search
     --oracle-declaration``) admits only cells within one cell of the true source, to measure how
     much success the declaration's guards cost; a mission on a vehicle never has one."""
@@ -146,7 +134,6 @@ class Declarer:
         self.config = config
         self._admit = admit
         self._cell: int | None = None
-        self._since_s = 0.0
         self._passed_upflow = False  # the vehicle has been upflow_pass_m upflow of self._cell
         self._odour: list[tuple[float, float, float]] = []  # detections (t, x, y), for persist_s
 
@@ -160,9 +147,8 @@ class Declarer:
         return self._cell is not None
 
     def arm(self, time_s: float, likelihood: FloatArray) -> None:
-        """Start judging at ``time_s`` (the first detection): the stable clock starts now."""
+        """Start judging at ``time_s`` (the first detection)."""
         self._cell = int(np.argmax(likelihood))
-        self._since_s = time_s
         self._passed_upflow = False
 
     def update(
@@ -173,7 +159,7 @@ class Declarer:
         flow: tuple[float, float] | None = None,
         detected: bool = False,
     ) -> Declaration | None:
-        """The declaration if an enabled rule fires at this tick, else None (always None unarmed).
+        """The declaration if the rule fires at this tick, else None (always None unarmed).
         With ``vehicle_m`` (x, y), nothing fires while the vehicle is farther than
         ``visit_radius_m`` from the estimated cell's centre. With ``upflow_pass_m`` > 0, nothing
         fires until the vehicle (``vehicle_m``) has been that far upflow of the centre against
@@ -186,7 +172,7 @@ class Declarer:
             self._odour.append((time_s, *vehicle_m))
         cell = int(np.argmax(likelihood))
         if cell != self._cell:
-            self._cell, self._since_s = cell, time_s
+            self._cell = cell
             self._passed_upflow = False
         if self.config.upflow_pass_m > 0.0:
             self._passed_upflow = self._passed_upflow or self._is_upflow(cell, vehicle_m, flow)
@@ -197,17 +183,9 @@ class Declarer:
             if math.hypot(vehicle_m[0] - cx, vehicle_m[1] - cy) > self.config.visit_radius_m:
                 return None
         mass = mass_within(self.grid, likelihood, cell, self.config.radius_m)
-        fired = {
-            # the tolerance keeps ticks like 0.1 s summed in floating point from missing the mark
-            DeclarationRule.STABLE: time_s - self._since_s >= self.config.stable_s - 1e-9,
-            DeclarationRule.MASS: mass >= self.config.probability,
-        }
-        rules = tuple(dict.fromkeys(r for r in self.config.rules if fired[r]))
-        if rules and not self._odour_persists(cell):
-            rules = ()
-        if rules and self._admit is not None and not self._admit(cell):
-            rules = ()
-        if not rules:
+        if mass < self.config.probability or not self._odour_persists(cell):
+            return None
+        if self._admit is not None and not self._admit(cell):
             return None
         x, y = self.grid.centre(cell)
         return Declaration(
@@ -218,7 +196,6 @@ class Declarer:
             y=y,
             probability=float(likelihood.flat[cell]),
             mass=mass,
-            rules=rules,
         )
 
     def _odour_persists(self, cell: int) -> bool:

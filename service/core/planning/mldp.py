@@ -55,7 +55,6 @@ class MldpPlanner:
     """``mldp``: §VI's 1-step MLDP, the admissible neighbour with the greatest alpha."""
 
     name: ClassVar[str] = "mldp"
-    steers_by_map: ClassVar[bool] = True
 
     def __init__(self, grid: Grid, config: PlanningConfig) -> None:
         self.grid = grid
@@ -75,7 +74,6 @@ class MldpPathPlanner(PathFollower):
     """``mldp-path``: §IV-C3's k-step MLDP to the estimate, followed until the estimate changes."""
 
     name: ClassVar[str] = "mldp-path"
-    steers_by_map: ClassVar[bool] = True
 
     def compute(self, ctx: PlanContext) -> list[int]:
         shortest = astar(self.grid, ctx.cell, ctx.goal, self.blocked)

@@ -68,7 +68,7 @@ def test_the_true_source_reads_back() -> None:
 
 def test_the_builder_accumulates_the_track_and_detections_and_draws_the_declaration() -> None:
     scene = SceneBuilder(cell_m=2.5, declared_radius_m=3.0, source=(9.0, 9.0))
-    declared = SourceDeclared(time_s=2.0, x=3.0, y=4.0, cell=7, probability=0.42, mass=0.8, rules=())
+    declared = SourceDeclared(time_s=2.0, x=3.0, y=4.0, cell=7, probability=0.42, mass=0.8)
     ticks = [
         scene.tick(Observation(0.0, 0.0, 0.0, 1.0, 0.0, True), 0.0, estimate=ESTIMATE, state="search"),
         scene.tick(Observation(1.0, 1.0, 0.0, 1.0, 0.0, False), 0.0, estimate=ESTIMATE, state="trace",

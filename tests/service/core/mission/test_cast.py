@@ -17,8 +17,8 @@ PLANNING = PlanningConfig(cast_width_m=10.0, cast_legs=3, flat_map_ratio=2.0, lo
 EAST = FlowFrame(1.0, 0.0)
 
 
-def cast(steers_by_map: bool = True) -> Cast:
-    return Cast(AREA, PLANNING, steers_by_map, radius_m=3.0)
+def cast() -> Cast:
+    return Cast(AREA, PLANNING, radius_m=3.0)
 
 
 def test_the_cast_is_laid_across_the_flow_through_the_last_detection() -> None:
@@ -44,7 +44,6 @@ def test_a_uniform_map_is_flat_a_peaked_one_is_not() -> None:
     peaked.flat[7] *= 3.0
     assert cast().map_is_flat(uniform)
     assert not cast().map_is_flat(peaked / peaked.sum())
-    assert not cast(steers_by_map=False).map_is_flat(uniform)  # the map-free baseline
 
 
 def test_a_map_that_knows_the_plume_holds_the_share_near_its_estimate() -> None:
@@ -52,4 +51,3 @@ def test_a_map_that_knows_the_plume_holds_the_share_near_its_estimate() -> None:
     pi.flat[AREA.cell_of(42.5, 2.5)] = 0.5
     assert cast().map_knows_the_plume(pi)
     assert not cast().map_knows_the_plume(np.full(AREA.shape, 1.0 / AREA.size))
-    assert not cast(steers_by_map=False).map_knows_the_plume(pi)

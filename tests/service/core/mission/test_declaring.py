@@ -3,7 +3,7 @@ the judgement that starts it and declares after it, and the probe upflow at the 
 
 import numpy as np
 
-from service.core.config import DeclarationConfig, DeclarationRule, PlanningConfig
+from service.core.config import DeclarationConfig, PlanningConfig
 from service.core.grid import Grid
 from service.core.mapping.belief import FloatArray
 from service.core.mapping.hmm import HmmMapper
@@ -21,7 +21,6 @@ SOURCE = AREA.cell_of(22.0, 3.0)
 SX, SY = AREA.centre(SOURCE)
 EAST = FlowFrame(1.0, 0.0)
 CONFIG = DeclarationConfig(
-    rules=[DeclarationRule.MASS],
     probability=0.8,
     upflow_pass_m=0.0,
     check_width_m=6.0,
@@ -47,7 +46,7 @@ def odour(t: float, x: float, y: float, detected: bool = True) -> Observation:
 
 
 def found_at_source() -> Declaration:
-    return Declaration(0.0, SOURCE, AREA.paper_number(SOURCE), SX, SY, 0.9, 0.9, (DeclarationRule.MASS,))
+    return Declaration(0.0, SOURCE, AREA.paper_number(SOURCE), SX, SY, 0.9, 0.9)
 
 
 # -- the check ----------------------------------------------------------------------------------

@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from service.core.config import DeclarationConfig, DeclarationRule
+from service.core.config import DeclarationConfig
 from service.core.grid import Grid
 from service.core.observation import Observation
 from service.core.planning.declaration import Declarer, mass_within, steady_odour
@@ -37,49 +37,20 @@ def test_mass_within_radius_by_hand() -> None:
     assert mass_within(G, pi, corner, 1.0) == pytest.approx((0 + 1 + 5) / 300)
 
 
-def test_stable_rule_fires_after_30_s_unchanged() -> None:
-    d = Declarer(G, PAPERS_DECLARATION.model_copy(update={"rules": [DeclarationRule.STABLE]}))
+def test_the_rule_names_the_cell_only_once_armed() -> None:
+    d = Declarer(G, PAPERS_DECLARATION.model_copy(update={"probability": 0.25, "radius_m": 0.0}))
     assert d.update(0.0, peaked(3)) is None  # not armed yet
     d.arm(100.0, peaked(3))
-    for t in range(101, 130):
-        assert d.update(float(t), peaked(3)) is None
-    found = d.update(130.0, peaked(3))
+    found = d.update(101.0, peaked(3))
     assert found is not None
-    assert found.rules == (DeclarationRule.STABLE,)
     assert found.cell == 3
     assert found.paper_cell == G.paper_number(3)
     assert (found.x, found.y) == G.centre(3)
     assert found.probability == pytest.approx(0.3)
 
 
-def test_a_new_estimate_restarts_the_clock() -> None:
-    d = Declarer(
-        G, PAPERS_DECLARATION.model_copy(update={"rules": [DeclarationRule.STABLE], "stable_s": 30.0})
-    )
-    d.arm(0.0, peaked(3))
-    assert d.update(10.0, peaked(7)) is None  # changed at t = 10
-    assert d.update(39.0, peaked(7)) is None
-    found = d.update(40.0, peaked(7))
-    assert found is not None
-    assert found.cell == 7
-
-
-def test_fractional_ticks_reach_the_mark() -> None:
-    d = Declarer(
-        G, PAPERS_DECLARATION.model_copy(update={"rules": [DeclarationRule.STABLE], "stable_s": 3.0})
-    )
-    d.arm(0.0, peaked(3))
-    t, found = 0.0, None
-    for _ in range(30):  # 0.1 s ticks summed in floating point: 2.9999999999999996
-        t += 0.1
-        found = d.update(t, peaked(3))
-    assert found is not None
-
-
-def test_mass_rule_and_which_fired() -> None:
-    config = PAPERS_DECLARATION.model_copy(
-        update={"rules": [DeclarationRule.MASS, DeclarationRule.STABLE], "probability": 0.6, "radius_m": 1.0}
-    )
+def test_mass_rule_counts_the_mass_within_the_radius() -> None:
+    config = PAPERS_DECLARATION.model_copy(update={"probability": 0.6, "radius_m": 1.0})
     d = Declarer(G, config)
     centre = G.cell_of(2.5, 2.5)
     d.arm(0.0, peaked(centre, 0.2))
@@ -90,24 +61,17 @@ def test_mass_rule_and_which_fired() -> None:
         pi.flat[side] = 0.04
     found = d.update(1.0, pi)
     assert found is not None
-    assert found.rules == (DeclarationRule.MASS,)
     assert found.mass == pytest.approx(0.66)
-    # the estimate has been the centre since arming at t = 0: at t = 30 both fire, in the
-    # configured order
-    only_mass = d.update(29.0, pi)
-    assert only_mass is not None
-    assert only_mass.rules == (DeclarationRule.MASS,)
-    both = d.update(30.0, pi)
-    assert both is not None
-    assert both.rules == (DeclarationRule.MASS, DeclarationRule.STABLE)
+    # within 0.5 m only the centre counts: 0.5 is short of 0.6
+    narrow = Declarer(G, config.model_copy(update={"radius_m": 0.5}))
+    narrow.arm(0.0, pi)
+    assert narrow.update(1.0, pi) is None
 
 
 def test_mass_rule_alone_ignores_a_stable_but_flat_map() -> None:
     d = Declarer(
         G,
-        PAPERS_DECLARATION.model_copy(
-            update={"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 1.0}
-        ),
+        PAPERS_DECLARATION.model_copy(update={"probability": 0.5, "radius_m": 1.0}),
     )
     d.arm(0.0, peaked(12, 0.1))
     assert all(d.update(float(t), peaked(12, 0.1)) is None for t in range(1, 100))
@@ -122,9 +86,7 @@ def test_the_hmm_gets_its_own_mass_threshold() -> None:
 
 
 def test_upflow_pass_waits_until_the_vehicle_has_been_upflow_of_the_estimate() -> None:
-    config = PAPERS_DECLARATION.model_copy(
-        update={"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 0.0, "upflow_pass_m": 1.0}
-    )
+    config = PAPERS_DECLARATION.model_copy(update={"probability": 0.5, "radius_m": 0.0, "upflow_pass_m": 1.0})
     d = Declarer(G, config)
     pi = peaked(12, 0.6)  # centre (2.5, 2.5); flow toward +x, so upflow is -x
     d.arm(0.0, pi)
@@ -153,7 +115,7 @@ def test_upflow_pass_is_on_by_default_off_at_0_and_for_the_hmm() -> None:
     assert config.for_mapper("pomdp").upflow_pass_m == 2.0
     pi = peaked(12, 0.6)  # centre (2.5, 2.5)
     east = (1.0, 0.0)
-    mass = {"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 0.0}
+    mass = {"probability": 0.5, "radius_m": 0.0}
     # the default pass (persistence, its own guard, off): nothing fires until 2 m upflow
     passing = Declarer(G, DeclarationConfig(persist_s=0.0).model_copy(update=mass))
     passing.arm(0.0, pi)
@@ -166,9 +128,7 @@ def test_upflow_pass_is_on_by_default_off_at_0_and_for_the_hmm() -> None:
 
 
 def test_persist_waits_for_odour_near_the_estimate_at_two_times_far_enough_apart() -> None:
-    config = PAPERS_DECLARATION.model_copy(
-        update={"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 0.0, "persist_s": 20.0}
-    )
+    config = PAPERS_DECLARATION.model_copy(update={"probability": 0.5, "radius_m": 0.0, "persist_s": 20.0})
     d = Declarer(G, config)
     pi = peaked(12, 0.6)  # centre (2.5, 2.5); visit radius 3 m
     d.arm(0.0, pi)
@@ -188,9 +148,7 @@ def test_persist_is_on_by_default_off_at_0_and_for_the_hmm() -> None:
     assert DeclarationConfig(persist_s=20.0).for_mapper("pomdp").persist_s == 20.0
     d = Declarer(
         G,
-        PAPERS_DECLARATION.model_copy(
-            update={"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 0.0}
-        ),
+        PAPERS_DECLARATION.model_copy(update={"probability": 0.5, "radius_m": 0.0}),
     )
     pi = peaked(12, 0.6)
     d.arm(0.0, pi)
@@ -199,9 +157,7 @@ def test_persist_is_on_by_default_off_at_0_and_for_the_hmm() -> None:
 
 def test_admit_ignores_a_rule_for_a_refused_cell() -> None:
     # the benchmark's perfect guard: the same peaked map fires for an admitted cell only
-    config = PAPERS_DECLARATION.model_copy(
-        update={"rules": [DeclarationRule.MASS], "probability": 0.5, "radius_m": 0.0}
-    )
+    config = PAPERS_DECLARATION.model_copy(update={"probability": 0.5, "radius_m": 0.0})
     refused = Declarer(G, config, admit=lambda cell: cell != 12)
     refused.arm(0.0, peaked(12, 0.6))
     assert all(refused.update(float(t), peaked(12, 0.6)) is None for t in range(1, 20))

@@ -125,7 +125,7 @@ def test_all_and_repeated_names() -> None:
     assert search.expand(["b", "a", "b"], ["a", "b"], "a") == ["b", "a"]
     with pytest.raises(ConfigError, match="unknown"):
         search.expand(["c"], ["a", "b"], "a")
-    assert "surge-cast" in search.planner_names()
+    assert "apf" in search.planner_names()
 
 
 @pytest.mark.parametrize("scenario", ["wang-laminar", "wang-turbulent"])
@@ -154,21 +154,14 @@ def test_a_seeded_mission_finds_the_source(scenario: str) -> None:
     assert (again.time_s, again.declared_x, again.path_m) == (r.time_s, r.declared_x, r.path_m)
 
 
-def test_surge_cast_baseline_runs_without_the_map() -> None:
-    configured = search.configure("wang-turbulent", "pomdp", "surge-cast")
-    r = run_mission(configured, 0, max_time_s=60.0)
-    assert r.time_s <= 60.0
-    assert r.path_m > 0.0
-
-
 def test_command_prints_one_json_object_per_configuration(capsys: pytest.CaptureFixture[str]) -> None:
     code = main(
         ["bench", "search", "--scenario", "wang-turbulent", "--mapper", "pomdp", "--planner", "astar",
-         "--planner", "surge-cast", "--runs", "2", "--jobs", "1", "--max-time", "40", "--json"]
+         "--planner", "apf", "--runs", "2", "--jobs", "1", "--max-time", "40", "--json"]
     )  # fmt: skip
     assert code == 0
     rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.startswith("{")]
-    assert [r["planner"] for r in rows] == ["astar", "surge-cast"]
+    assert [r["planner"] for r in rows] == ["astar", "apf"]
     for row in rows:
         assert list(row)[: len(search.JSON_KEYS)] == list(search.JSON_KEYS)
         assert row["runs"] == 2
