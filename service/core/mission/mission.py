@@ -53,7 +53,6 @@ from service.core.mission.events import (
     PlumeLost,
     SourceDeclared,
 )
-from service.core.mission.pattern import Pattern
 from service.core.mission.routing import Routing
 from service.core.mission.sweep import Sweep
 from service.core.mission.transitions import TRANSITIONS, Cue
@@ -177,8 +176,7 @@ class Mission:
             return []
         events: list[MissionEvent] = []
         t = obs.time_s
-        if self._declaring.recheck(obs, self.mapper.likelihood):
-            self._take_over(())
+        self._declaring.recheck(obs, self.mapper.likelihood)
         if obs.detected:
             if self._state is not MissionState.TRACE:
                 first = self._state is MissionState.FIND and not self._declaring.armed
@@ -195,7 +193,8 @@ class Mission:
             self._go(cue)
         verdict = self._declaring.judge(obs, self.mapper.likelihood, self._frame)
         if isinstance(verdict, Check):
-            self._take_over(verdict.pattern.vertices)
+            if self._state is not MissionState.TRACE:
+                self._go(Cue.CHECK)
         elif verdict is not None:
             events.append(verdict)
             self._go(Cue.SOURCE)
@@ -215,24 +214,17 @@ class Mission:
 
     def _go(self, cue: Cue) -> None:
         """Take ``cue``'s transition (``TRANSITIONS``) and its entry actions. A check or a probe
-        detour ends with the state it began in; a contact from the sweep pauses the sweep (its
-        pattern is kept for ``LONE_QUIET``)."""
+        detour ends with the state it began in, except the check that ``CHECK`` takes to TRACE; a
+        contact from the sweep pauses the sweep (its pattern is kept for ``LONE_QUIET``)."""
         from_find = self._state is MissionState.FIND
         self._state = TRANSITIONS[self._state, cue]
-        self._declaring.reset()
+        if cue is not Cue.CHECK:
+            self._declaring.reset()
         self._sweep_hits = 0 if from_find and cue is Cue.ODOUR else None
         if self._state is MissionState.LOST:
             self._cast.lay(None if self._last_detection is None else self._last_detection[1:], self._frame)
         elif cue is Cue.FLAT_CAST:
             self._sweep.restart()
-
-    def _take_over(self, legs: tuple[Waypoint, ...]) -> None:
-        """Put ``legs`` in the place of this state's pattern (the sweep's or the cast's): a check
-        takes over the pattern of the state it starts in, and leaves none when called off."""
-        if self._state is MissionState.FIND:
-            self._sweep.pattern = Pattern(legs)
-        elif self._state is MissionState.LOST:
-            self._cast.pattern = Pattern(legs)
 
     # -- behaviours: the waypoints each state wants, before the safety rule -------------------
 
@@ -245,7 +237,7 @@ class Mission:
 
     def _lost(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
         likelihood = self.mapper.likelihood
-        if self._declaring.check is not None or self._cast.map_knows_the_plume(likelihood):
+        if self._cast.map_knows_the_plume(likelihood):
             return self._trace(ctx)
         wanted = self._cast.waypoints(ctx, self._routing)
         if wanted is not None:

@@ -19,6 +19,7 @@ class Cue(StrEnum):
     LONE_QUIET = "lone quiet"  # a contact of the sweep with at most lone_contact_hits detections,
     # not repeated for lone_contact_lost_after_s: most likely a false alarm
     FLAT_CAST = "flat cast"  # the cast is over and the map holds no evidence (flat_map_ratio)
+    CHECK = "check"  # a declaration rule fired and the check across the flow is to be flown
     SOURCE = "source"  # a declaration rule fired and its cell was vouched for
 
 
@@ -30,6 +31,8 @@ TRANSITIONS: Final[dict[tuple[MissionState, Cue], MissionState]] = {
     (TRACE, Cue.QUIET): LOST,  # a cast around the last detection
     (TRACE, Cue.LONE_QUIET): FIND,  # sweep on from where the contact paused it
     (LOST, Cue.FLAT_CAST): FIND,  # a new sweep from where the vehicle is
+    (FIND, Cue.CHECK): TRACE,  # the check is flown while tracing, wherever the rule fired
+    (LOST, Cue.CHECK): TRACE,
     (FIND, Cue.SOURCE): DECLARED,
     (TRACE, Cue.SOURCE): DECLARED,
     (LOST, Cue.SOURCE): DECLARED,

@@ -697,6 +697,39 @@ def test_odour_upflow_of_the_estimate_calls_the_check_off() -> None:
     assert visited[-2:] == [(sx - 3.0, sy - 6.0)] * 2  # the far side of the new check, then declared
 
 
+@pytest.mark.parametrize("back_to", [MissionState.FIND, MissionState.LOST])
+def test_a_check_that_starts_outside_trace_is_flown_in_trace(back_to: MissionState) -> None:
+    # the rule fires while the mission sweeps again after a lone contact (FIND) or casts (LOST):
+    # the check is flown while tracing, whatever the state's own pattern was
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.05)
+    lone = 1 if back_to is MissionState.FIND else 0
+    planning = PAPERS_PLANNING.model_copy(
+        update={"lone_contact_hits": lone, "lone_contact_lost_after_s": 5.0, "lost_after_s": 5.0}
+    )
+    decl = PAPERS_DECLARATION.model_copy(
+        update={"probability": 0.8, "check_width_m": 6.0, "check_upflow_m": 3.0}
+    )
+    mission = Mission(AREA, mapper, planning, decl)
+    far = VehicleState(90.0, -40.0)
+    assert mission.step(Observation(0.0, far.x, far.y, 1.0, 0.0, True), far).state is MissionState.TRACE
+    assert mission.step(Observation(5.0, far.x, far.y, 1.0, 0.0, False), far).state is back_to
+    mapper.peak_at(SOURCE, 0.9)
+    sx, sy = AREA.centre(SOURCE)
+    vehicle = Vehicle(sx, sy)
+    out = mission.step(Observation(6.0, sx, sy, 1.0, 0.0, False), vehicle.state)
+    assert out.state is MissionState.TRACE
+    assert out.events == ()
+    assert out.waypoints is not None
+    assert (out.waypoints[0].x, out.waypoints[0].y) == (sx - 3.0, pytest.approx(sy + 6.0))
+    out, visited = fly_dry_until_declared(mission, vehicle, out, range(7, 20))
+    assert out.state is MissionState.DECLARED
+    assert visited[:2] == [(sx - 3.0, sy + 6.0), (sx - 3.0, sy - 6.0)]
+    (declared,) = out.events
+    assert isinstance(declared, SourceDeclared)
+    assert declared.check is CrossCheck.FLOWN
+
+
 def test_odour_at_the_estimate_does_not_call_the_check_off() -> None:
     _, mission, vehicle, out = start_check()
     sx, sy = AREA.centre(SOURCE)

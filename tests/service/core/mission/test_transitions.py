@@ -28,4 +28,7 @@ def test_a_flat_map_after_the_cast_sweeps_again() -> None:
 
 def test_the_source_may_be_declared_from_every_state_but_declared_is_final() -> None:
     assert all(TRANSITIONS[s, Cue.SOURCE] is DECLARED for s in (FIND, TRACE, LOST))
+    # a check is flown while tracing, wherever its rule fired
+    assert {s: TRANSITIONS[s, Cue.CHECK] for s in (FIND, LOST)} == {FIND: TRACE, LOST: TRACE}
+    assert (TRACE, Cue.CHECK) not in TRANSITIONS
     assert not any(s is DECLARED for s, _ in TRANSITIONS)
