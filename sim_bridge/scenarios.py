@@ -131,6 +131,8 @@ class VehicleSpec(_Spec):
     pivot_angle_deg: float = Field(default=60.0, gt=0, le=180)
     slows_to_turn: bool = False
     """AUV kinematics: no turning on the spot (set pivot_angle_deg = 180), slower in turns."""
+    arrival_radius_m: float = Field(default=0.0, ge=0, le=50)
+    """The autopilot stops this far short of a target (ArduPilot's WP_RADIUS); 0: on it."""
 
     @model_validator(mode="after")
     def _one_of(self) -> Self:
@@ -452,6 +454,7 @@ def build_world(scenario: Scenario, seed: int | None = None) -> World:
             max_turn_rate_dps=v.max_turn_rate_dps,
             pivot_angle_deg=v.pivot_angle_deg,
             slows_to_turn=v.slows_to_turn,
+            arrival_radius_m=v.arrival_radius_m,
         ),
         obstacles=grid.obstacles,
         dt_s=world.dt_s,

@@ -37,6 +37,9 @@ class VehicleParams:
     """Heading errors above this are turned on the spot (ArduPilot Rover's WP_PIVOT_ANGLE)."""
     slows_to_turn: bool = False
     """AUV-like: surge speed x max(cos(heading error), 1/4) instead of full speed."""
+    arrival_radius_m: float = 0.0
+    """A target this close counts as reached and the vehicle stops short of it (ArduPilot's
+    WP_RADIUS, 2 m on Rover by default); 0: it drives onto the target."""
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.speed_mps) and self.speed_mps > 0):
@@ -45,6 +48,8 @@ class VehicleParams:
             raise ConfigError(f"vehicle max_turn_rate_dps must be positive, got {self.max_turn_rate_dps}")
         if not 0 < self.pivot_angle_deg <= 180:
             raise ConfigError(f"vehicle pivot_angle_deg must be in (0, 180], got {self.pivot_angle_deg}")
+        if not (math.isfinite(self.arrival_radius_m) and self.arrival_radius_m >= 0):
+            raise ConfigError(f"vehicle arrival_radius_m must be >= 0, got {self.arrival_radius_m}")
 
 
 @dataclass(frozen=True)
@@ -101,6 +106,8 @@ def step(
     distance = math.hypot(dx, dy)
     if distance < 1e-6:  # there (up to rounding): sit exactly on the target
         return replace(still, x_m=target_m[0], y_m=target_m[1])
+    if distance <= params.arrival_radius_m:
+        return still
     theta = math.atan2(dy, dx)  # eq. 10, target heading
     error = wrap_angle(state.heading_rad - theta)  # epsilon = phi - theta
     max_turn = math.radians(params.max_turn_rate_dps) * dt_s

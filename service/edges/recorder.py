@@ -158,9 +158,9 @@ class Recorder:
     """Owns the MCAP file of one run. ``with Recorder(config) as rec:`` opens it in
     ``recorder.dir`` and writes the configuration; then per tick::
 
-        rec.tick(obs, mapper.likelihood, mapper.plume, estimate=est, state="search", path=wps)
+        rec.tick(obs, search.likelihood, search.plume, estimate=est, state="search", path=wps)
 
-    with exactly the observation given to ``mapper.update`` and the maps right after it
+    with exactly the observation the search fused and its maps right after it
     (replay recomputes them from these). ``write_setpoint`` / ``write_event`` at any time.
     Every call is flushed to the OS before it returns (measured 0.4 ms median, 0.9 ms max for a
     tick with two 100 x 100 grids, zstd). The methods are thread-safe, so

@@ -90,3 +90,13 @@ def test_bad_vehicle_parameters_are_refused() -> None:
         VehicleParams(max_turn_rate_dps=-1.0)
     with pytest.raises(ConfigError):
         VehicleParams(pivot_angle_deg=0.0)
+
+
+def test_an_arrival_radius_stops_the_vehicle_short_of_its_target_as_ardupilot_does() -> None:
+    params = VehicleParams(speed_mps=1.0, arrival_radius_m=2.0)
+    path = drive(VehicleState(0.0, 0.0, EAST), (10.0, 0.0), params, 150)
+    assert 8.0 <= path[-1].x_m < 8.2  # stopped within 2 m, the step that got it there at most 0.1 m in
+    near = drive(VehicleState(0.0, 0.0, EAST), (1.5, 0.0), params, 10)
+    assert (near[-1].x_m, near[-1].y_m) == (0.0, 0.0)  # a target inside the radius is not driven to
+    with pytest.raises(ConfigError):
+        VehicleParams(arrival_radius_m=-1.0)

@@ -4,6 +4,7 @@ The sweep, the cast and the check each own one; the same rule flies them all."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -12,6 +13,12 @@ from service.core.planning.safety import segment_clear
 if TYPE_CHECKING:
     from service.core.mission.routing import Routing
     from service.core.planning.base import PlanContext, Waypoint
+
+
+ARRIVAL_M = 0.5
+"""A turning point counts as reached within this distance even from another cell: a point on a
+cell boundary may read as the neighbouring cell, and an autopilot stops once inside its
+acceptance radius (ArduPilot Rover's WP_RADIUS: set it to at most this, see the README)."""
 
 
 @dataclass
@@ -29,7 +36,8 @@ class Pattern:
             vertex = self.vertices[self.index]
             vertex_cell = grid.cell_of(vertex.x, vertex.y)
             target = routing.reach.goal_for(ctx.cell, vertex_cell)
-            if target != ctx.cell:
+            arrived = math.hypot(vertex.x - ctx.vehicle.x, vertex.y - ctx.vehicle.y) <= ARRIVAL_M
+            if target != ctx.cell and not arrived:
                 # a vertex in a blocked cell (an obstacle rectangle may cover only part of a
                 # cell) would be refused by the safety rule: the route goes to its stand-in
                 straight = target == vertex_cell

@@ -258,19 +258,17 @@ def test_invalid_values_are_refused_before_anything_is_written(tmp_path: Path) -
 
 CHILD = """
 import sys
-from service.core.config import build_config
-from service.core.grid import Grid
-from service.core.mapping import mapper_from_config
+from service.api import Search
 from service.edges.recorder import Recorder
 sys.path.insert(0, sys.argv[2])
 from test_recorder import CONFIG, obs_of
 
-mapper = mapper_from_config(CONFIG, Grid.from_config(CONFIG.area))
+search = Search(CONFIG)
 with Recorder(CONFIG, directory=sys.argv[1]) as rec:
     for k in range(1_000_000):
         obs = obs_of(k)
-        mapper.update(obs)
-        rec.tick(obs, mapper.likelihood, mapper.plume, estimate=mapper.estimate(), state="search")
+        search.update_map(obs)
+        rec.tick(obs, search.likelihood, search.plume, estimate=search.estimate(), state="search")
         print(k, flush=True)
 """
 

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from mcap.writer import CompressionType
 
+from service.api import Search
 from service.cli import main
 from service.core.config import Config, build_config
 from service.core.grid import Grid
@@ -38,17 +39,17 @@ def record(
     compression: CompressionType = CompressionType.ZSTD,
 ) -> Path:
     """Record a run exactly as the service does: update, then record the obs and the maps."""
-    mapper = mapper_from_config(config, Grid.from_config(config.area))
+    search = Search(config)
     with Recorder(config, directory=directory, compression=compression) as rec:
         for tick, obs in enumerate(observations(), start=1):
-            mapper.update(obs)
-            slim = np.array(mapper.likelihood)
+            search.update_map(obs)
+            slim = np.array(search.likelihood)
             if tick == corrupt_tick:
                 # one cell off by one float32 ulp: the smallest change a recording can hold
                 slim32 = slim.astype(np.float32)
                 slim[3, 4] = np.nextafter(slim32[3, 4], np.float32(1.0))
             rec.tick(
-                obs, slim, mapper.plume, estimate=mapper.estimate(), state="search", path=[(obs.x, obs.y)]
+                obs, slim, search.plume, estimate=search.estimate(), state="search", path=[(obs.x, obs.y)]
             )
     assert rec.path is not None
     return rec.path

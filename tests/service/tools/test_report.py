@@ -6,10 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from service.api import Search
 from service.cli import main
 from service.core.config import build_config
-from service.core.grid import Grid
-from service.core.mapping import mapper_from_config
 from service.core.observation import Observation
 from service.edges.foxglove_scene import SceneBuilder
 from service.edges.recorder import Recorder
@@ -40,14 +39,14 @@ def png_size(path: Path) -> tuple[int, int]:
 
 def record(directory: Path, *, declare: bool = True) -> Path:
     """A run recorded as the service records it, with the simulated source and a declaration."""
-    mapper = mapper_from_config(CONFIG, Grid.from_config(CONFIG.area))
+    search = Search(CONFIG)
     scene = SceneBuilder(cell_m=1.0, declared_radius_m=CONFIG.declaration.radius_m, source=SOURCE)
     states = ["search"] * 20 + ["trace"] * 30
     with Recorder(CONFIG, directory=directory) as rec:
         for obs, state in zip(observations(), states, strict=True):
-            mapper.update(obs)
-            estimate = mapper.estimate()
-            rec.tick(obs, mapper.likelihood, mapper.plume, estimate=estimate, state=state)
+            search.update_map(obs)
+            estimate = search.estimate()
+            rec.tick(obs, search.likelihood, search.plume, estimate=estimate, state=state)
             rec.write_messages(scene.tick(obs, 0.0, estimate=estimate, state=state))
         if declare:
             rec.write_event(obs.time_s, "source_declared", "declared", x=estimate.x, y=estimate.y)

@@ -45,3 +45,14 @@ def test_a_leg_across_an_obstacle_is_routed_around_it() -> None:
 
 def test_an_empty_pattern_is_over() -> None:
     assert Pattern().follow(ctx_at(OPEN, 2.5, 2.5), Routing.of(OPEN, PlanningConfig())) is None
+
+
+def test_a_turning_point_on_a_cell_boundary_is_reached_from_the_neighbouring_cell() -> None:
+    # 40.0 is the boundary between two columns: a vehicle on the point (up to rounding) or stopped
+    # just short of it, as an autopilot does within its acceptance radius, is there
+    pattern = Pattern((Waypoint(40.0 + 1e-12, 22.5), Waypoint(2.5, 22.5)))
+    routing = Routing.of(OPEN, PlanningConfig())
+    assert pattern.follow(ctx_at(OPEN, 39.7, 22.5), routing) == (Waypoint(2.5, 22.5),)
+    assert pattern.index == 1
+    far = Pattern((Waypoint(40.0 + 1e-12, 22.5), Waypoint(2.5, 22.5)))
+    assert far.follow(ctx_at(OPEN, 38.5, 22.5), routing) == (Waypoint(40.0 + 1e-12, 22.5),)
