@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from service.core.mission.events import CrossCheck, SourceDeclared
-from service.core.mission.pattern import Pattern
+from service.core.mission.pattern import ARRIVAL_M, Pattern
 from service.core.planning.base import Waypoint
 from service.core.planning.cast import cast_vertices
 from service.core.planning.declaration import Declarer, mass_within, steady_odour
@@ -40,10 +40,11 @@ if TYPE_CHECKING:
     from service.core.planning.declaration import Declaration
     from service.core.planning.reach import Reachability
 
-PASS_PROBE_MARGIN_M = 0.25
-"""The probe to the upflow pass flies this far beyond the upflow pass, so that the pass is met, not grazed."""
-PASS_PROBE_REACHED_M = 0.3
-"""The upflow pass probe's point counts as reached this close to it."""
+PASS_PROBE_REACHED_M = ARRIVAL_M
+"""The upflow pass probe's point counts as reached this close to it (an autopilot stops short)."""
+PASS_PROBE_MARGIN_M = 0.25 + PASS_PROBE_REACHED_M
+"""The probe to the upflow pass flies this far beyond the upflow pass, so that the pass is met, not
+grazed, even by a vehicle that stops PASS_PROBE_REACHED_M short of the probe's point."""
 UPFLOW_PROBES: tuple[tuple[int, int], ...] = tuple(
     (d_row, d_col) for d_row in (-1, 0, 1) for d_col in (-1, 0, 1) if (d_row, d_col) != (0, 0)
 )

@@ -24,6 +24,7 @@ from service.core.mission import (
     PlumeLost,
     SourceDeclared,
 )
+from service.core.mission.declaring import PASS_PROBE_MARGIN_M, PASS_PROBE_REACHED_M
 from service.core.observation import Observation
 from service.core.planning import PLANNERS
 from service.core.planning.base import VehicleState, Waypoint
@@ -768,7 +769,7 @@ def test_the_probe_upflow_flies_until_the_upflow_pass_is_made(pass_m: float) -> 
     v = VehicleState(cx, cy)
     out = mission.step(Observation(0.0, v.x, v.y, *flow, True), v)  # at the estimate, in odour
     assert out.waypoints is not None
-    point = Waypoint(cx - 2.25, cy)  # just beyond the 2 m pass
+    point = Waypoint(cx - pass_m - PASS_PROBE_MARGIN_M, cy)  # beyond the pass by the margin
     if pass_m == 0.0:  # no pass to make: the cell upflow, its centre 5 m upflow
         assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)
         return
@@ -777,7 +778,10 @@ def test_the_probe_upflow_flies_until_the_upflow_pass_is_made(pass_m: float) -> 
     out = mission.step(Observation(1.0, v.x, v.y, *flow, False), v)
     assert out.waypoints is None
     assert out.state is MissionState.TRACE
-    v = VehicleState(cx - 2.25, cy)  # there: the pass is made, so the cell probe takes over
+    # stopped short of the point, as an autopilot does within its radius: the pass is made all the
+    # same, so the cell probe takes over
+    v = VehicleState(point.x + PASS_PROBE_REACHED_M - 0.01, cy)
+    assert cx - v.x > pass_m
     out = mission.step(Observation(2.0, v.x, v.y, *flow, False), v)
     assert out.waypoints is not None
     assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)

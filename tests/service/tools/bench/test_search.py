@@ -154,6 +154,16 @@ def test_a_seeded_mission_finds_the_source(scenario: str) -> None:
     assert (again.time_s, again.declared_x, again.path_m) == (r.time_s, r.declared_x, r.path_m)
 
 
+@pytest.mark.parametrize("scenario", ["wang-laminar", "wang-turbulent"])
+def test_a_vehicle_that_stops_half_a_metre_short_of_its_targets_still_declares(scenario: str) -> None:
+    # ArduPilot Rover holds still once within WP_RADIUS of a guided target (the parameter files set
+    # 0.5 m): every pattern, probe and pass must be met by a vehicle that never quite arrives
+    configured = search.configure(scenario, "pomdp", "astar", ["world.vehicle.arrival_radius_m=0.5"])
+    r = run_mission(configured, 0)
+    assert r.declared
+    assert r.correct
+
+
 def test_command_prints_one_json_object_per_configuration(capsys: pytest.CaptureFixture[str]) -> None:
     code = main(
         ["bench", "search", "--scenario", "wang-turbulent", "--mapper", "pomdp", "--planner", "astar",
