@@ -40,11 +40,12 @@ if TYPE_CHECKING:
     from service.core.planning.declaration import Declaration
     from service.core.planning.reach import Reachability
 
-PASS_PROBE_REACHED_M = ARRIVAL_M
-"""The upflow pass probe's point counts as reached this close to it (an autopilot stops short)."""
-PASS_PROBE_MARGIN_M = 0.25 + PASS_PROBE_REACHED_M
-"""The probe to the upflow pass flies this far beyond the upflow pass, so that the pass is met, not
-grazed, even by a vehicle that stops PASS_PROBE_REACHED_M short of the probe's point."""
+PASS_PROBE_MARGIN_M = 0.25
+"""The probe to the upflow pass flies this far beyond the upflow pass, so that the pass is met, not grazed."""
+PASS_PROBE_REACHED_M = 0.3
+"""The upflow pass probe's point counts as reached this close to it."""
+STOPPED_M = 0.05
+"""A vehicle that moved less than this in a tick has stopped (an autopilot inside its acceptance radius)."""
 UPFLOW_PROBES: tuple[tuple[int, int], ...] = tuple(
     (d_row, d_col) for d_row in (-1, 0, 1) for d_col in (-1, 0, 1) if (d_row, d_col) != (0, 0)
 )
@@ -108,6 +109,10 @@ class EstimateProbe:
     upflow_pass_m: float
     detour: int | None = None
     pass_target: tuple[int, Waypoint] | None = None
+    stopped_short: bool = False
+    """The vehicle stopped within ARRIVAL_M of the pass probe's point without making the pass (an
+    autopilot holds inside its acceptance radius): the pass is as far as it will go."""
+    _last: tuple[float, float] | None = None
 
     def waypoints(
         self, ctx: PlanContext, routing: Routing, frame: FlowFrame | None, passed_upflow: bool
@@ -118,15 +123,22 @@ class EstimateProbe:
             # would turn back at the first step off it, so the probe is flown until reached
             return routing.to_cell(ctx, self.detour)
         self.detour = None
+        last, self._last = self._last, (ctx.vehicle.x, ctx.vehicle.y)
+        self.stopped_short = False
         if self.pass_target is not None:
             cell, target = self.pass_target
-            there = math.hypot(ctx.vehicle.x - target.x, ctx.vehicle.y - target.y) < PASS_PROBE_REACHED_M
+            away = math.hypot(ctx.vehicle.x - target.x, ctx.vehicle.y - target.y)
+            stopped = (
+                last is not None and math.hypot(ctx.vehicle.x - last[0], ctx.vehicle.y - last[1]) < STOPPED_M
+            )
+            self.stopped_short = cell == ctx.goal and not passed_upflow and stopped and away <= ARRIVAL_M
+            there = away < PASS_PROBE_REACHED_M or self.stopped_short
             if cell == ctx.goal and not there and not passed_upflow:
                 return (target,)
             self.pass_target = None
         if routing.reach.goal_for(ctx.cell, ctx.goal) != ctx.cell:
             return None
-        point = self._pass_point(ctx, frame, passed_upflow)
+        point = self._pass_point(ctx, frame, passed_upflow or self.stopped_short)
         if point is not None:
             self.pass_target = (ctx.goal, point)
             return (point,)
@@ -273,7 +285,10 @@ class Declaring:
         """The check's legs while it is flown, else the probe's at the estimate; None: neither."""
         if self.check is not None and not self.check.done:
             return self.check.waypoints(ctx, routing)
-        return self.probe.waypoints(ctx, routing, frame, self._declarer.passed_upflow)
+        waypoints = self.probe.waypoints(ctx, routing, frame, self._declarer.passed_upflow)
+        if self.probe.stopped_short:
+            self._declarer.accept_pass()
+        return waypoints
 
     def _vouch(self, found: Declaration, frame: FlowFrame | None) -> CrossCheck | Check | None:
         """How ``found`` may be declared now without the upflow check (off, or steady odour); else

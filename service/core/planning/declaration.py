@@ -142,6 +142,11 @@ class Declarer:
         """Whether the vehicle has made the upflow pass of the current estimate."""
         return self._passed_upflow
 
+    def accept_pass(self) -> None:
+        """Count the upflow pass of the current estimate as made: the vehicle went as far upflow as
+        its autopilot takes it toward the pass (it stops inside its acceptance radius)."""
+        self._passed_upflow = self._cell is not None
+
     @property
     def armed(self) -> bool:
         return self._cell is not None

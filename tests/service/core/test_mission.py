@@ -24,7 +24,6 @@ from service.core.mission import (
     PlumeLost,
     SourceDeclared,
 )
-from service.core.mission.declaring import PASS_PROBE_MARGIN_M, PASS_PROBE_REACHED_M
 from service.core.observation import Observation
 from service.core.planning import PLANNERS
 from service.core.planning.base import VehicleState, Waypoint
@@ -769,7 +768,7 @@ def test_the_probe_upflow_flies_until_the_upflow_pass_is_made(pass_m: float) -> 
     v = VehicleState(cx, cy)
     out = mission.step(Observation(0.0, v.x, v.y, *flow, True), v)  # at the estimate, in odour
     assert out.waypoints is not None
-    point = Waypoint(cx - pass_m - PASS_PROBE_MARGIN_M, cy)  # beyond the pass by the margin
+    point = Waypoint(cx - 2.25, cy)  # just beyond the 2 m pass
     if pass_m == 0.0:  # no pass to make: the cell upflow, its centre 5 m upflow
         assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)
         return
@@ -778,13 +777,29 @@ def test_the_probe_upflow_flies_until_the_upflow_pass_is_made(pass_m: float) -> 
     out = mission.step(Observation(1.0, v.x, v.y, *flow, False), v)
     assert out.waypoints is None
     assert out.state is MissionState.TRACE
-    # stopped short of the point, as an autopilot does within its radius: the pass is made all the
-    # same, so the cell probe takes over
-    v = VehicleState(point.x + PASS_PROBE_REACHED_M - 0.01, cy)
-    assert cx - v.x > pass_m
+    v = VehicleState(cx - 2.25, cy)  # there: the pass is made, so the cell probe takes over
     out = mission.step(Observation(2.0, v.x, v.y, *flow, False), v)
     assert out.waypoints is not None
     assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)
+
+
+def test_a_vehicle_that_stops_short_of_the_pass_probe_has_made_the_pass() -> None:
+    # an autopilot holds still inside its acceptance radius (ArduPilot's WP_RADIUS): 0.45 m short
+    # of the probe's point the vehicle is 0.2 m short of the pass and will go no further
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.5)
+    decl = DeclarationConfig(probability=1.0, upflow_pass_m=2.0)
+    mission = Mission(AREA, mapper, PlanningConfig(), decl)
+    cx, cy = AREA.centre(SOURCE)
+    flow = (1.0, 0.0)
+    out = mission.step(Observation(0.0, cx, cy, *flow, True), VehicleState(cx, cy))
+    assert out.waypoints == (Waypoint(cx - 2.25, cy),)
+    v = VehicleState(cx - 1.8, cy)
+    out = mission.step(Observation(1.0, v.x, v.y, *flow, False), v)
+    assert out.waypoints is None  # still on its way, as far as the mission can tell
+    out = mission.step(Observation(2.0, v.x, v.y, *flow, False), v)  # it has not moved: stopped
+    assert out.waypoints is not None
+    assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)  # the cell probe
 
 
 def steady_mission(hits: list[bool], turn: float = 0.0) -> MissionOutput:
