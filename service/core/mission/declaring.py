@@ -127,14 +127,14 @@ class EstimateProbe:
         self.stopped_short = False
         if self.pass_target is not None:
             cell, target = self.pass_target
-            away = math.hypot(ctx.vehicle.x - target.x, ctx.vehicle.y - target.y)
-            stopped = (
-                last is not None and math.hypot(ctx.vehicle.x - last[0], ctx.vehicle.y - last[1]) < STOPPED_M
-            )
-            self.stopped_short = cell == ctx.goal and not passed_upflow and stopped and away <= ARRIVAL_M
-            there = away < PASS_PROBE_REACHED_M or self.stopped_short
-            if cell == ctx.goal and not there and not passed_upflow:
-                return (target,)
+            if cell == ctx.goal and not passed_upflow:
+                away = math.hypot(ctx.vehicle.x - target.x, ctx.vehicle.y - target.y)
+                moved = math.inf
+                if last is not None:
+                    moved = math.hypot(ctx.vehicle.x - last[0], ctx.vehicle.y - last[1])
+                self.stopped_short = moved < STOPPED_M and away <= ARRIVAL_M
+                if away >= PASS_PROBE_REACHED_M and not self.stopped_short:
+                    return (target,)
             self.pass_target = None
         if routing.reach.goal_for(ctx.cell, ctx.goal) != ctx.cell:
             return None
