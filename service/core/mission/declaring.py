@@ -242,12 +242,10 @@ class Declaring:
         while self._recent and self._recent[0].time_s <= obs.time_s - keep_s:
             self._recent.popleft()
 
-    def recheck(self, obs: Observation, likelihood: FloatArray) -> bool:
-        """Call the check off if this tick's odour or estimate says so; whether it was."""
-        if self.check is None or self.check.holds(obs, int(np.argmax(likelihood))):
-            return False
-        self.check = None
-        return True
+    def recheck(self, obs: Observation, likelihood: FloatArray) -> None:
+        """Call the check off if this tick's odour or estimate says so."""
+        if self.check is not None and not self.check.holds(obs, int(np.argmax(likelihood))):
+            self.check = None
 
     def reset(self) -> None:
         """A new mission state: no check, no probe detour (a pass probe stays while it applies)."""
