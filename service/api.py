@@ -31,13 +31,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from service.core.config import Config, load_config
-from service.core.grid import Grid
+from service.core.grid import Grid, model_division
 from service.core.mapping import mapper_from_config
 from service.core.mapping.belief import FloatArray
-from service.core.mapping.mapper import Estimate, SourceMapper
+from service.core.mapping.mapper import Estimate, SourceMapper, estimate_of
 from service.core.mission import Mission, MissionEvent, MissionState, SourceDeclared
 from service.core.observation import Observation
 from service.core.planning.base import VehicleState
@@ -107,8 +107,15 @@ class Search:
         vehicle has none)."""
         self.config = config
         self.grid = Grid.from_config(config.area)
-        self._mapper = mapper_from_config(config, self.grid)
-        self._mission = Mission.from_config(config, self.grid, self._mapper, admit=admit)
+        self._division = model_division(self.grid)
+        self.model_grid = self.grid.subdivided(*self._division)
+        """The finer grid the source is modelled and searched on (``grid.model_division``); the
+        maps and estimates given out are summed back onto ``grid``, the configured area's."""
+        self._mapper = mapper_from_config(config, self.model_grid)
+        if admit is not None:
+            user_admit = admit
+            admit = lambda cell: user_admit(self.grid.cell_of(*self.model_grid.centre(cell)))  # noqa: E731
+        self._mission = Mission.from_config(config, self.model_grid, self._mapper, admit=admit)
         self._aggregator = TickAggregator(
             config.sensor.threshold, max_position_age_s=2.0 * config.mapping.tick_s
         )
@@ -173,7 +180,8 @@ class Search:
         if vehicle is None:
             vehicle = (obs.x, obs.y, self._heading_rad)
         out = self._mission.step(obs, VehicleState(*vehicle))
-        for event in out.events:
+        events = tuple(self._on_grid(event) for event in out.events)
+        for event in events:
             if isinstance(event, SourceDeclared) and self._declared is None:
                 self._declared = self._declaration(event)
         waypoints = None if out.waypoints is None else tuple((w.x, w.y) for w in out.waypoints)
@@ -181,10 +189,10 @@ class Search:
             time_s=obs.time_s,
             waypoints=waypoints,
             state=out.state,
-            estimate=out.estimate,
+            estimate=self.estimate(),
             declared=self._declared,
             detected=obs.detected,
-            events=out.events,
+            events=events,
             observation=obs,
         )
 
@@ -217,16 +225,16 @@ class Search:
     @property
     def likelihood(self) -> FloatArray:
         """The source likelihood map pi, shape (rows, columns), row 0 the southern row."""
-        return self._mapper.likelihood
+        return self.grid.coarsened(self._mapper.likelihood, *self._division)
 
     @property
     def plume(self) -> FloatArray:
         """The plume likelihood map alpha, shape (rows, columns)."""
-        return self._mapper.plume
+        return self.grid.coarsened(self._mapper.plume, *self._division)
 
     def estimate(self) -> Estimate:
         """The map's most likely source cell now."""
-        return self._mapper.estimate()
+        return estimate_of(self.likelihood, self.grid)
 
     @property
     def mapper(self) -> SourceMapper:
@@ -238,9 +246,15 @@ class Search:
         """The mission state machine itself (saved and restored with the mapper)."""
         return self._mission
 
+    def _on_grid(self, event: MissionEvent) -> MissionEvent:
+        """The event with any cell number on ``grid`` (the mission's are on ``model_grid``)."""
+        if isinstance(event, SourceDeclared):
+            return replace(event, cell=self.grid.paper_number(self.grid.cell_of(event.x, event.y)))
+        return event
+
     def _declaration(self, event: SourceDeclared) -> Declaration:
         radius_m = self.config.declaration.radius_m + 0.5 * math.hypot(
-            self.grid.cell_width_m, self.grid.cell_height_m
+            self.model_grid.cell_width_m, self.model_grid.cell_height_m
         )
         return Declaration(event.time_s, event.x, event.y, event.mass, radius_m, event.cell)
 

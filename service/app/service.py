@@ -190,7 +190,7 @@ class Service:
         self.stats.state = str(self.search.state)
         log.info(
             "snapshot: restored %d ticks, mission %s, estimate cell %d, map %s", snapshot.ticks,
-            self.search.state, self.search.estimate().cell, map_digest(self.search.likelihood),
+            self.search.state, self.search.estimate().cell, map_digest(self.search.mapper.likelihood),
         )  # fmt: skip
 
     async def run(self, stop: asyncio.Event, *, opener: EdgeOpener = open_edges) -> ServiceStats:

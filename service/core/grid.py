@@ -75,6 +75,17 @@ class Grid:
             obstacles=tuple(area.obstacles),
         )
 
+    def subdivided(self, kx: int, ky: int) -> Grid:
+        """The same area with every cell split into ``kx`` columns and ``ky`` rows."""
+        return Grid(
+            self.x_min, self.x_max, self.y_min, self.y_max, self.columns * kx, self.rows * ky, self.obstacles
+        )
+
+    def coarsened(self, field: npt.NDArray[np.float64], kx: int, ky: int) -> npt.NDArray[np.float64]:
+        """Sum a field of ``subdivided(kx, ky)`` over each of this grid's cells, shape (n, m)."""
+        total: npt.NDArray[np.float64] = field.reshape(self.rows, ky, self.columns, kx).sum(axis=(1, 3))
+        return total
+
     @property
     def shape(self) -> tuple[int, int]:
         """(n, m): the shape of every map array."""
@@ -187,3 +198,26 @@ class Grid:
     def in_obstacle(self, x: float, y: float) -> bool:
         """True when the point (x, y) lies inside (or on the edge of) an obstacle rectangle."""
         return any(x0 <= x <= x1 and y0 <= y <= y1 for x0, y0, x1, y1 in self.obstacles)
+
+
+MODEL_CELL_M = 2.0
+"""Largest side of the cells the search models the source in, m: about the width of a plume a few
+metres from its source. In cells much wider than the plume a vehicle standing upflow of the source
+but inside its cell misses odour the model promised there, and the map cannot hold the source."""
+MODEL_CELLS_MAX = 10_000
+"""The model grid is split no further than this many cells (``oslim bench mapping``'s target size)."""
+
+
+def model_division(grid: Grid) -> tuple[int, int]:
+    """How many columns and rows (kx, ky) to split each of ``grid``'s cells into for the search's
+    model: the longer side of the model's cells is split once more until no side exceeds
+    MODEL_CELL_M, or until a further split would pass MODEL_CELLS_MAX cells."""
+    kx = ky = 1
+    while True:
+        wide, high = grid.cell_width_m / kx, grid.cell_height_m / ky
+        if max(wide, high) <= MODEL_CELL_M:
+            return kx, ky
+        nkx, nky = (kx + 1, ky) if wide >= high else (kx, ky + 1)
+        if grid.size * nkx * nky > MODEL_CELLS_MAX:
+            return kx, ky
+        kx, ky = nkx, nky

@@ -114,6 +114,15 @@ class Estimate:
     entropy: float
 
 
+def estimate_of(pi: FloatArray, grid: Grid) -> Estimate:
+    """The most likely cell of the source map ``pi`` over ``grid``."""
+    flat = int(np.argmax(pi))
+    x, y = grid.centre(flat)
+    return Estimate(
+        cell=grid.paper_number(flat), x=x, y=y, probability=float(pi.flat[flat]), entropy=entropy_nats(pi)
+    )
+
+
 @dataclass(frozen=True)
 class FlowStep:
     """One tick of the flow history: its operator and the displacement u dt it carried."""
@@ -156,15 +165,7 @@ class SourceMapper(ABC):
         return view
 
     def estimate(self) -> Estimate:
-        flat = int(np.argmax(self._pi))
-        x, y = self.grid.centre(flat)
-        return Estimate(
-            cell=self.grid.paper_number(flat),
-            x=x,
-            y=y,
-            probability=float(self._pi.flat[flat]),
-            entropy=self.entropy(),
-        )
+        return estimate_of(self._pi, self.grid)
 
     def entropy(self) -> float:
         """Entropy of pi in nats."""

@@ -119,7 +119,7 @@ def test_zenoh_maps_queryable_and_mcap_replay(tmp_path: Path) -> None:
 
                 def on_sample(sample: Any) -> None:
                     grid = decode_grid(sample.payload.to_bytes())
-                    received.append((grid, service.mapper.likelihood.astype(np.float32)))
+                    received.append((grid, service.search.likelihood.astype(np.float32)))
                     if len(received) >= 3:
                         got.set()
 

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from service.core.errors import ConfigError, OutsideAreaError
-from service.core.grid import Grid
+from service.core.grid import MODEL_CELL_M, MODEL_CELLS_MAX, Grid, model_division
 
 PAPER = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25)
 
@@ -80,3 +80,29 @@ def test_invalid_grids() -> None:
         Grid(0.0, 1.0, 0.0, 1.0, 0, 1)
     with pytest.raises(ConfigError):
         Grid(0.0, float("nan"), 0.0, 1.0, 1, 1)
+
+
+def test_the_model_grid_splits_the_papers_cells_to_at_most_two_metres() -> None:
+    papers = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25)  # 2.5 m x 4 m
+    assert model_division(papers) == (2, 2)
+    fine = papers.subdivided(2, 2)
+    assert (fine.columns, fine.rows, fine.cell_width_m, fine.cell_height_m) == (80, 50, 1.25, 2.0)
+    assert max(fine.cell_width_m, fine.cell_height_m) <= MODEL_CELL_M
+    assert model_division(Grid(0.0, 10.0, 0.0, 10.0, columns=10, rows=10)) == (1, 1)  # 1 m cells stay
+
+
+def test_the_model_grid_is_split_no_further_than_its_cell_budget() -> None:
+    large = Grid(0.0, 200.0, -100.0, 100.0, columns=80, rows=50)  # 4000 cells of 2.5 m x 4 m
+    kx, ky = model_division(large)
+    assert (kx, ky) == (1, 2)  # 8000 cells; splitting the columns too would make 16000
+    assert large.size * kx * ky <= MODEL_CELLS_MAX
+
+
+def test_coarsening_sums_each_cells_subcells_in_map_order() -> None:
+    grid = Grid(0.0, 4.0, 0.0, 2.0, columns=2, rows=1)
+    fine = grid.subdivided(2, 2)
+    field = np.arange(fine.size, dtype=float).reshape(fine.shape)  # rows from the south
+    # fine rows 0-1, columns 0-1 -> coarse (0, 0); columns 2-3 -> coarse (0, 1)
+    np.testing.assert_array_equal(grid.coarsened(field, 2, 2), [[0 + 1 + 4 + 5, 2 + 3 + 6 + 7]])
+    x, y = fine.centre(fine.cell_of(3.5, 1.5))
+    assert grid.cell_of(x, y) == 1

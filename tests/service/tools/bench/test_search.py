@@ -180,13 +180,14 @@ def test_command_prints_one_json_object_per_configuration(capsys: pytest.Capture
 
 
 def test_oracle_declaration_ignores_a_wrong_declaration() -> None:
-    # farrell2003 seed 8 without the upflow check (and as it was before session 8's settings) names
-    # (26.25, -4), 7.4 m from the source, at 86 s; the perfect guard ignores that cell and goes on
-    before = ["declaration.check_width_m=0", "declaration.steady_hit_rate=0", "sensor.miss_floor=0.3"]
-    scenario = search.configure("farrell2003", "pomdp", "astar", before)
+    # farrell2003 seed 8 with every guard of the declaration off but the mass (and that at 0.5) names
+    # (26.875, -3), 7.5 m from the source, at 65 s; the perfect guard ignores that cell and goes on
+    unguarded = ["declaration.check_width_m=0", "declaration.steady_hit_rate=0", "declaration.persist_s=0",
+                 "declaration.upflow_pass_m=0", "declaration.probability=0.5"]  # fmt: skip
+    scenario = search.configure("farrell2003", "pomdp", "astar", unguarded)
     plain = run_mission(scenario, 8, max_time_s=120.0)
     assert plain.wrong
-    assert plain.declared_x == pytest.approx(26.25)
+    assert plain.declared_x == pytest.approx(26.875)
     oracle = run_mission(scenario, 8, max_time_s=120.0, oracle=True)
     assert not oracle.wrong
     if oracle.declared_x is not None and oracle.declared_y is not None:
