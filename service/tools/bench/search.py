@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
@@ -40,6 +39,7 @@ from service.core.errors import ConfigError
 from service.core.grid import Grid
 from service.core.mapping.belief import FloatArray
 from service.core.mission import MissionState
+from service.tools.bench.workers import worker_pool
 from sim_bridge.scenarios import Scenario, build_world, load_scenario, place
 
 DEFAULT_MAX_TIME_S = 300.0
@@ -437,7 +437,7 @@ def run_configurations(
             batch = [next(results) for _ in range(runs)]
             yield summarise(scenario, m, p, batch, max_time_s), batch
         return
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    with worker_pool(workers) as pool:
         mapped = iter(counted(pool.map(run_spec, specs, chunksize=1)))
         for m, p in configs:
             batch = [next(mapped) for _ in range(runs)]

@@ -16,7 +16,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -26,6 +26,7 @@ import numpy as np
 
 from service.core.config import Config, load_config
 from service.tools.bench.search import FailureClass, MissionResult, run_mission
+from service.tools.bench.workers import worker_pool
 from sim_bridge.generator import SUITE_DIR, WorldClass, available_classes, draw_scenario, load_class
 
 SUMMARY_KEYS = ("classes", "missions", "worst_class", "worst_success_rate", "wrong_rate", "missions_per_s")
@@ -247,7 +248,7 @@ def _local(specs: list[SuiteMission], jobs: int, progress: Progress) -> Iterator
             progress(1)
             yield outcome
         return
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
+    with worker_pool(jobs) as pool:
         futures: list[Future[tuple[MissionResult, float]]] = []
         for spec in specs:
             future = pool.submit(run_suite_mission, spec)
