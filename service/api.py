@@ -56,13 +56,14 @@ HEADING_MIN_MOVE_M = 0.05
 class Declaration:
     """The declared source.
 
-    ``x``, ``y``: the centre of the declared cell (map frame, m). The statement is "the source
-    lies within ``radius_m`` of (x, y) with probability ``confidence``": ``confidence`` is the
-    source likelihood map's mass over the cells whose centres lie within
-    ``declaration.radius_m`` of the declared cell's (what the mass rule weighs), and ``radius_m``
-    is that radius plus half a cell's diagonal, so that every point of those cells is inside it.
-    ``oslim bench suite`` measures how often the statement is true. ``cell``: the papers' 1-based
-    cell number; ``time_s``: when it was declared.
+    ``x``, ``y``: the centre of the declared cell of the model grid (``Search.model_grid``; map
+    frame, m). The statement is "the source lies within ``radius_m`` of (x, y) with probability
+    ``confidence``": ``confidence`` is the source likelihood map's mass over the model cells whose
+    centres lie within ``declaration.radius_m`` of the declared one's (what the mass rule weighs),
+    and ``radius_m`` is that radius plus half a model cell's diagonal, so that every point of those
+    cells is inside it. ``oslim bench suite`` measures how often the statement is true. ``cell``:
+    the papers' 1-based number of the area's cell that holds (x, y); ``time_s``: when it was
+    declared.
     """
 
     time_s: float
