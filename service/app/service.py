@@ -411,7 +411,10 @@ class Service:
         target, system = self.target, self.gate.system
         if target is None or system is None or not self._gate_state.allowed:
             return False
-        if not is_safe_point(self.grid, target.x, target.y):
+        # the mission plans on the model grid and its safety rule used that grid's obstacle cells:
+        # an area cell that an obstacle covers only in part is partly free there (every obstacle
+        # rectangle is refused on either grid)
+        if not is_safe_point(self.search.model_grid, target.x, target.y):
             self.stats.unsafe_targets += 1
             log.error("refused unsafe target (%.2f, %.2f)", target.x, target.y)
             self.target = None

@@ -14,12 +14,14 @@ import pytest
 from service.api import Search
 from service.app.edges import Edges
 from service.app.service import STREAMS, Clock, Service
-from service.core.config import Config
+from service.core.config import Config, build_config
 from service.core.errors import LinkError
 from service.core.observation import Observation
+from service.core.planning.base import Waypoint
 from service.edges.foxglove_scene import VEHICLE_TOPIC
 from service.edges.mavlink_link import LinkCounters
 from service.edges.signing import SigningCounters
+from service.edges.telemetry import Heartbeat
 
 SPEED = 40.0  # service seconds per wall second: a 1 s tick every 25 ms
 ARMED = 128  # MAV_MODE_FLAG_SAFETY_ARMED
@@ -248,3 +250,21 @@ def test_a_link_that_closes_ends_the_run() -> None:
         assert stats.observations == 0
 
     asyncio.run(body())
+
+
+def test_a_target_beside_an_obstacle_goes_out_where_the_mission_planned_it() -> None:
+    # the mission plans on 1.25 m model cells; the obstacle ends at x = 56.25 m, halfway across the
+    # area's 2.5 m cell 55-57.5 m: (57.1, 3) is free on the mission's grid and must be sent
+    config = build_config({"area": {"obstacles": [[36.25, 0.25, 56.25, 7.75]]}})
+    link, _, recorder, edges = fakes()
+    service = Service(config, clock=Clock(SPEED))
+    service.gate.heard(Heartbeat(0.0, 1, 1, 10, 3, config.mavlink.guided_mode, armed=True))
+    service._update_gate(edges, 0.5)
+    service.target = Waypoint(57.1, 3.0)
+    assert service._command(edges, 0.5)
+    assert [(x, y) for _, _, x, y, _, _ in link.of("setpoint")] == [(57.1, 3.0)]
+    service.target = Waypoint(56.0, 3.0)  # inside the rectangle: refused, and commanding stops
+    assert not service._command(edges, 1.0)
+    assert service.stats.unsafe_targets == 1
+    assert service.target is None
+    assert len(recorder.setpoints) == 1
