@@ -133,10 +133,6 @@ class PlanningConfig(_Section):
     apf_step_m: float = Field(default=2.0, gt=0)
     apf_obstacle_gain: float = Field(default=1.0, ge=0)
     apf_obstacle_range_m: float = Field(default=5.0, gt=0)
-    zigzag_spacing_m: float = Field(default=30.0, gt=0)
-    zigzag_near_edge_spacings: float = Field(default=1.5, ge=0, le=10)
-    """A start less than this many zigzag spacings from the upflow edge sweeps downflow first
-    (0: always upflow first, the papers' sweep)."""
     cast_width_m: float = Field(default=10.0, gt=0)
     cast_legs: int = Field(default=4, ge=0, le=100)
     lost_trace_mass: float = Field(default=0.2, ge=0, le=1)
@@ -272,13 +268,21 @@ def apply_override(data: dict[str, Any], path: list[str], value: Any, text: str)
     node[path[-1]] = value
 
 
+_NO_ZIGZAG = "removed: plume finding chooses its legs from the map (there is no zigzag); delete the key"
+RETIRED_KEYS = {
+    "planning.zigzag_spacing_m": _NO_ZIGZAG,
+    "planning.zigzag_near_edge_spacings": _NO_ZIGZAG,
+}
+"""Keys an earlier version read, and what to do about them (named instead of "unknown key")."""
+
+
 def _format(error: ValidationError, origin: str) -> str:
     lines = []
     for item in error.errors():
         loc = ".".join(str(p) for p in item["loc"]) or "(top level)"
         reason = item["msg"]
         if item["type"] == "extra_forbidden":
-            reason = "unknown key"
+            reason = RETIRED_KEYS.get(loc, "unknown key")
         got = item.get("input")
         shown = "" if isinstance(got, dict) or item["type"] == "extra_forbidden" else f" (got {got!r})"
         lines.append(f"{origin}: {loc}: {reason}{shown}")

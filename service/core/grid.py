@@ -81,6 +81,20 @@ class Grid:
             self.x_min, self.x_max, self.y_min, self.y_max, self.columns * kx, self.rows * ky, self.obstacles
         )
 
+    def widened(self) -> Grid:
+        """A grid of (2n - 1) x (2m - 1) cells of this size, no obstacles, whose centre cell
+        (row n - 1, column m - 1) is this grid's cell (0, 0): every offset between two of this
+        grid's cells is an offset from its centre cell (for translation-invariant kernels)."""
+        w, h = self.cell_width_m, self.cell_height_m
+        return Grid(
+            self.x_min - (self.columns - 1) * w,
+            self.x_max,
+            self.y_min - (self.rows - 1) * h,
+            self.y_max,
+            2 * self.columns - 1,
+            2 * self.rows - 1,
+        )
+
     def coarsened(self, field: npt.NDArray[np.float64], kx: int, ky: int) -> npt.NDArray[np.float64]:
         """Sum a field of ``subdivided(kx, ky)`` over each of this grid's cells, shape (n, m)."""
         total: npt.NDArray[np.float64] = field.reshape(self.rows, ky, self.columns, kx).sum(axis=(1, 3))

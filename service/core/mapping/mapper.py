@@ -237,6 +237,20 @@ class SourceMapper(ABC):
         self._last_time = None if np.isnan(last_time) else last_time
         self.history = deque(steps[-self.params.window :], maxlen=self.params.window)
 
+    def odour_kernel(self) -> FloatArray:
+        """P(odour at the vehicle is detected | the source dr rows and dc columns from the vehicle's
+        cell), at index (n - 1 + dr, m - 1 + dc), shape (2n - 1, 2m - 1): this mapper's own
+        ``detection_likelihood`` under the current flow history, without false alarms, for a
+        vehicle anywhere (the filament models depend only on the offset between the cells)."""
+        wide = self.grid.widened()
+        twin = type(self)(wide, self.params)
+        twin.history = self.history
+        twin._reach_m = self._reach_m
+        pf = self.params.false_alarm
+        likely = twin.detection_likelihood(wide.size // 2)
+        kernel: FloatArray = np.clip((likely - pf) / (1.0 - pf), 0.0, 1.0)
+        return kernel
+
     def _ignore(self, reason: str) -> None:
         self.ignored[reason] = self.ignored.get(reason, 0) + 1
 

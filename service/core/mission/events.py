@@ -23,7 +23,7 @@ class MissionState(StrEnum):
 @dataclass(frozen=True)
 class PlumeFound:
     """A detection outside ``TRACE``: the mission's first (``first``), one that ends ``LOST``, or
-    one met by a sweep resumed after a lone detection (``planning.lone_contact_hits``)."""
+    one met in ``FIND`` again after a lone detection (``planning.lone_contact_hits``)."""
 
     time_s: float
     x: float

@@ -3,29 +3,27 @@
 Seed pomdp-astar §II-A: a search "can be divided into three phases, namely plume finding, plume
 tracing, and source declaration". The states, each flown by its own behaviour:
 
-- ``FIND`` (published as ``search``): no detection yet; a zigzag sweep across the flow
-  (``Sweep``).
+- ``FIND`` (published as ``search``): no detection yet; straight legs, each the one the map
+  expects odour on most often per metre (``Prospect``).
 - ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate; the
   declaration's legs (``Declaring``: the check across the flow, the probe upflow at the
   estimate) go first.
 - ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
   last detection (``Cast``), then the planner again. A detection returns to ``TRACE``.
   With ``flat_map_ratio`` > 0, a cast that ends with a map holding no evidence goes back to
-  ``FIND``: a new sweep from where the vehicle is.
-  With ``lone_contact_hits`` > 0, a contact the sweep met with at most that many detections is
-  lost after ``lone_contact_lost_after_s`` instead, and goes back to ``FIND``, on along the sweep
-  from where it stopped: a false alarm (the detector's, or a stray puff) is not worth a cast,
-  and the sweep crosses the flow again anyway.
+  ``FIND``: a new leg from where the vehicle is.
+  With ``lone_contact_hits`` > 0, a contact met in ``FIND`` with at most that many detections is
+  lost after ``lone_contact_lost_after_s`` instead, and goes back to ``FIND`` (a new leg from
+  where it stopped, chosen by the map that now holds the contact): a false alarm (the
+  detector's, or a stray puff) is not worth a cast.
   With ``lost_trace_mass`` > 0, while the estimate holds that share of the map the vehicle goes
   on tracing instead of casting.
 - ``DECLARED``: a declaration rule fired and its cell was vouched for (``Declaring``); the
   vehicle holds. Rules are only judged after the first detection: before it a flat map's argmax
   never moves.
 
-The transitions are ``transitions.TRANSITIONS``. A check across the flow takes over the pattern
-of the state it starts in (the sweep's or the cast's) and leaves none when called off; only the
-trace flies it to its end, so one started while sweeping (after a lone contact) is flown by the
-sweep as its own legs.
+The transitions are ``transitions.TRANSITIONS``. A check across the flow is flown in ``TRACE``
+wherever the rule fired (``Cue.CHECK``).
 
 ``Mission.step`` is pure: its inputs are this tick's observation (whose ``time_s`` is the only
 clock) and the vehicle state; it updates the mapper it was given and returns the waypoints to fly
@@ -53,8 +51,8 @@ from service.core.mission.events import (
     PlumeLost,
     SourceDeclared,
 )
+from service.core.mission.prospect import Prospect
 from service.core.mission.routing import Routing
-from service.core.mission.sweep import Sweep
 from service.core.mission.transitions import TRANSITIONS, Cue
 from service.core.planning import make_planner
 from service.core.planning.base import PlanContext, Waypoint
@@ -92,13 +90,13 @@ class Mission:
         self._routing = Routing.of(grid, self.planning)
         decl = (declaration or DeclarationConfig()).for_mapper(mapper.name)
         self._declaring = Declaring(grid, decl, admit)
-        self._sweep = Sweep(grid, self.planning)
+        self._prospect = Prospect(grid)
         self._cast = Cast(grid, self.planning, decl.radius_m)
         self._emitter = Emitter(grid)
         self._state = MissionState.FIND
         self._last_time: float | None = None
         self._last_detection: tuple[float, float, float] | None = None  # (t, x, y)
-        self._sweep_hits: int | None = None  # detections since a contact paused the sweep
+        self._contact_hits: int | None = None  # detections since a contact in FIND
         self._frame: FlowFrame | None = None  # the mean flow's direction
 
     @classmethod
@@ -123,7 +121,7 @@ class Mission:
         }
 
     def restore_state(self, state: dict[str, Any]) -> None:
-        """Continue in the phase ``save_state`` saved; a sweep or cast pattern is laid out anew,
+        """Continue in the phase ``save_state`` saved; a leg or cast pattern is laid out anew,
         and past the first detection the declaration rule is re-armed from the restored map.
         The steady-odour record is not saved: it starts afresh, so no check is skipped until it
         has filled again (``steady_min_contact_s`` after the next odour)."""
@@ -162,7 +160,7 @@ class Mission:
 
     def _update_mean_flow(self, obs: Observation) -> None:
         """The direction (``_frame``) of the mean flow over the mapper's flow history (this tick's
-        flow before there is any): turbulent noise on single ticks must not turn the sweep around."""
+        flow before there is any): turbulent noise on single ticks must not turn the legs around."""
         history = self.mapper.history
         dx = sum(step.dx_m for step in history) if history else obs.flow_x
         dy = sum(step.dy_m for step in history) if history else obs.flow_y
@@ -184,8 +182,8 @@ class Mission:
                 if first:
                     self._declaring.arm(t, self.mapper.likelihood)
                 self._go(Cue.ODOUR)
-            if self._sweep_hits is not None:
-                self._sweep_hits += 1
+            if self._contact_hits is not None:
+                self._contact_hits += 1
             self._last_detection = (t, obs.x, obs.y)
         elif (cue := self._quiet(t)) is not None and self._last_detection is not None:
             t_last, x_last, y_last = self._last_detection
@@ -202,11 +200,11 @@ class Mission:
 
     def _quiet(self, t: float) -> Cue | None:
         """Whether tracing has gone without odour long enough to be lost: ``LONE_QUIET`` after a
-        lone contact of the sweep, ``QUIET`` otherwise; never while a check is flown."""
+        lone contact in ``FIND``, ``QUIET`` otherwise; never while a check is flown."""
         if self._state is not MissionState.TRACE or self._last_detection is None:
             return None
         p = self.planning
-        lone = self._sweep_hits is not None and self._sweep_hits <= p.lone_contact_hits
+        lone = self._contact_hits is not None and self._contact_hits <= p.lone_contact_hits
         wait = p.lone_contact_lost_after_s if lone else p.lost_after_s
         if t - self._last_detection[0] < wait or self._declaring.check is not None:
             return None
@@ -215,21 +213,21 @@ class Mission:
     def _go(self, cue: Cue) -> None:
         """Take ``cue``'s transition (``TRANSITIONS``) and its entry actions. A check or a probe
         detour ends with the state it began in, except the check that ``CHECK`` takes to TRACE; a
-        contact from the sweep pauses the sweep (its pattern is kept for ``LONE_QUIET``)."""
+        contact in ``FIND`` counts its detections (for ``LONE_QUIET``)."""
         from_find = self._state is MissionState.FIND
         self._state = TRANSITIONS[self._state, cue]
         if cue is not Cue.CHECK:
             self._declaring.reset()
-        self._sweep_hits = 0 if from_find and cue is Cue.ODOUR else None
+        self._contact_hits = 0 if from_find and cue is Cue.ODOUR else None
         if self._state is MissionState.LOST:
             self._cast.lay(None if self._last_detection is None else self._last_detection[1:], self._frame)
-        elif cue is Cue.FLAT_CAST:
-            self._sweep.restart()
+        elif self._state is MissionState.FIND:
+            self._prospect.restart()
 
     # -- behaviours: the waypoints each state wants, before the safety rule -------------------
 
     def _find(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
-        return self._sweep.waypoints(ctx, self._frame, self._routing)
+        return self._prospect.waypoints(ctx, self._frame, self._routing)
 
     def _trace(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
         wanted = self._declaring.waypoints(ctx, self._routing, self._frame)

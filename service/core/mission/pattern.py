@@ -1,6 +1,6 @@
 """A pattern: turning points flown in order, and how far along them the vehicle is.
 
-The sweep, the cast and the check each own one; the same rule flies them all."""
+The plume finder, the cast and the check each own one; the same rule flies them all."""
 
 from __future__ import annotations
 
@@ -43,8 +43,8 @@ class Pattern:
                 straight = target == vertex_cell
                 if straight and segment_clear(grid, (ctx.vehicle.x, ctx.vehicle.y), (vertex.x, vertex.y)):
                     # a clear leg is flown straight: A*'s cell staircase would put the diagonal
-                    # part of a sweep leg anywhere along it, and a leg that first runs along the
-                    # previous one sweeps nothing new
+                    # part of a leg anywhere along it, and a leg that first runs along the
+                    # previous one looks at nothing new
                     return (vertex,)
                 return routing.to_cell(ctx, target)
             self.index += 1

@@ -1,4 +1,4 @@
-"""Coordinates along and across the flow, shared by the zigzag and the cast.
+"""Coordinates along and across the flow, used by the cast, the plume finder and the declaration's check.
 
 ``along`` grows in the direction the flow moves toward (downflow); ``cross`` grows to the left
 of it. Turning patterns are laid out in these coordinates and clipped to the hull of the cell

@@ -106,3 +106,17 @@ def test_coarsening_sums_each_cells_subcells_in_map_order() -> None:
     np.testing.assert_array_equal(grid.coarsened(field, 2, 2), [[0 + 1 + 4 + 5, 2 + 3 + 6 + 7]])
     x, y = fine.centre(fine.cell_of(3.5, 1.5))
     assert grid.cell_of(x, y) == 1
+
+
+def test_the_widened_grid_holds_every_offset_around_its_centre_cell() -> None:
+    grid = Grid(0.0, 10.0, -4.0, 2.0, columns=4, rows=3, obstacles=((1.0, -3.0, 2.0, -2.0),))
+    wide = grid.widened()
+    assert wide.shape == (5, 7)
+    assert (wide.cell_width_m, wide.cell_height_m) == (grid.cell_width_m, grid.cell_height_m)
+    assert wide.obstacles == ()
+    # its centre cell is the grid's first cell; the grid's last cell is (n - 1, m - 1) cells from it
+    centre = wide.size // 2
+    assert wide.row_col(centre) == (2, 3)
+    assert wide.centre(centre) == grid.centre(0)
+    row, col = wide.row_col(wide.cell_of(*grid.centre(grid.size - 1)))
+    assert (row, col) == (4, 6)

@@ -53,10 +53,15 @@ class ScriptedMapper(SourceMapper):
         out: FloatArray = self._table[cell]
         return out
 
+    def odour_kernel(self) -> FloatArray:
+        """Odour from a source in the vehicle's row upflow (West) of it, or in its cell."""
+        n, m = self.grid.shape
+        kernel = np.zeros((2 * n - 1, 2 * m - 1))
+        kernel[n - 1, :m] = 0.5
+        return kernel
+
 
 PAPERS_PLANNING = PlanningConfig(
-    zigzag_spacing_m=10.0,
-    zigzag_near_edge_spacings=0.0,
     lost_trace_mass=0.0,
     lost_after_s=20.0,
     flat_map_ratio=0.0,
@@ -64,8 +69,8 @@ PAPERS_PLANNING = PlanningConfig(
     lone_contact_lost_after_s=20.0,
 )
 """The planning these tests were written against: the papers' mechanisms without the later guards
-(no downflow-first sweep near the edge, tracing on while lost, sweeping again on a flat map or
-lone contacts); a test of one of those turns it on."""
+(tracing on while lost, looking for the plume again on a flat map or after lone contacts); a
+test of one of those turns it on."""
 
 PAPERS_DECLARATION = DeclarationConfig(
     upflow_pass_m=0.0, check_width_m=0.0, persist_s=0.0, steady_hit_rate=0.0
@@ -268,9 +273,7 @@ SOURCE = AREA.cell_of(22.0, 3.0)
 
 
 def mission_with(mapper: SourceMapper, **declaration: object) -> Mission:
-    planning = PAPERS_PLANNING.model_copy(
-        update={"lost_after_s": 10.0, "cast_width_m": 10.0, "cast_legs": 2, "zigzag_spacing_m": 10.0}
-    )
+    planning = PAPERS_PLANNING.model_copy(update={"lost_after_s": 10.0, "cast_width_m": 10.0, "cast_legs": 2})
     decl = PAPERS_DECLARATION.model_copy(update=declaration)
     return Mission(AREA, mapper, planning, decl)
 
@@ -287,15 +290,18 @@ def test_find_trace_lose_recover_declare() -> None:
         out = mission.step(Observation(t, v.x, v.y, *flow, detected), v)
         return out.state, out.events, out.waypoints
 
-    # FIND: a zigzag across the flow (flow East: the first leg runs North, across it)
+    # FIND: no flow history at the first tick, so hold; then a leg chosen by the map
     state, events, wps = tick(0.0)
     assert state is MissionState.FIND
     assert events == ()
+    assert wps == (Waypoint(v.x, v.y),)
+    state, events, wps = tick(1.0)
+    assert state is MissionState.FIND
     assert wps is not None
-    # a leg clear of obstacles is flown straight to the turning point itself, not along A*'s cells
-    assert wps == (Waypoint(90.0, AREA.y_centres[-1]),)
-    assert wps[-1].y == pytest.approx(AREA.y_centres[-1])
-    assert tick(1.0)[2] is None  # nothing changed: keep flying
+    # a leg clear of obstacles is flown straight to its end, not along A*'s cells
+    (end,) = wps
+    assert math.dist((end.x, end.y), (v.x, v.y)) >= 5.0
+    assert tick(2.0)[2] is None  # nothing changed: keep flying
     # the first detection: TRACE toward the estimate
     state, events, wps = tick(5.0, detected=True)
     assert state is MissionState.TRACE
@@ -434,27 +440,23 @@ def test_from_config() -> None:
         Mission.from_config(config, AREA, ScriptedMapper(Grid(0.0, 1.0, 0.0, 1.0, columns=1, rows=1)))
 
 
-def test_the_sweep_turns_with_the_mean_flow() -> None:
+def test_find_chooses_a_new_leg_when_the_mean_flow_turns() -> None:
     mapper = ScriptedMapper(AREA)
     mission = Mission(AREA, mapper, PlanningConfig(), NEVER)
     v = VehicleState(50.0, 0.0)
-    x_edges = (AREA.x_centres[0], AREA.x_centres[-1])
-    y_edges = (AREA.y_centres[0], AREA.y_centres[-1])
-    out = mission.step(Observation(0.0, v.x, v.y, 1.0, 0.0, False), v)
-    assert out.waypoints is not None
-    assert min(abs(out.waypoints[-1].y - e) for e in y_edges) < 1e-9  # legs run North-South
-    for t in range(1, 6):
-        mission.step(Observation(float(t), v.x, v.y, 1.0, 0.0, False), v)
-    # single noisy ticks across do not turn it (the mean flow is still East) ...
+    for t in range(6):
+        out = mission.step(Observation(float(t), v.x, v.y, 1.0, 0.0, False), v)
+    assert out.waypoints is None  # flying the leg chosen at t = 1
+    # single noisy ticks across do not change it (the mean flow is still East) ...
     out = mission.step(Observation(6.0, v.x, v.y, 0.0, 3.0, False), v)
     assert out.waypoints is None
-    # ... a lasting turn to North does: the legs now run East-West
-    last = None
-    for t in range(7, 20):
-        got = mission.step(Observation(float(t), v.x, v.y, 0.0, 1.0, False), v).waypoints
-        last = got if got is not None else last
-    assert last is not None
-    assert min(abs(last[-1].x - e) for e in x_edges) < 1e-9  # legs run East-West
+    # ... a lasting turn to North does
+    chosen = [
+        t
+        for t in range(7, 20)
+        if mission.step(Observation(float(t), v.x, v.y, 0.0, 1.0, False), v).waypoints is not None
+    ]
+    assert len(chosen) == 1
 
 
 @pytest.mark.parametrize(
@@ -494,7 +496,7 @@ def test_a_lost_plume_is_traced_on_while_the_estimate_holds_the_map(
 
 
 @pytest.mark.parametrize(
-    ("peak", "ratio", "method", "sweeps"),
+    ("peak", "ratio", "method", "looks_again"),
     [
         (None, 2.0, "astar", True),  # a uniform map: its estimate is merely the first cell
         (0.00375, 2.0, "astar", True),  # 1.5 times the uniform share (1 / 400): no evidence
@@ -502,8 +504,8 @@ def test_a_lost_plume_is_traced_on_while_the_estimate_holds_the_map(
         (0.01, 2.0, "astar", False),  # 4 times: the map knows something, on toward its estimate
     ],
 )
-def test_a_cast_that_ends_with_a_flat_map_sweeps_again(
-    peak: float | None, ratio: float, method: str, sweeps: bool
+def test_a_cast_that_ends_with_a_flat_map_looks_for_the_plume_again(
+    peak: float | None, ratio: float, method: str, looks_again: bool
 ) -> None:
     mapper = ScriptedMapper(AREA)
     if peak is None:
@@ -521,20 +523,21 @@ def test_a_cast_that_ends_with_a_flat_map_sweeps_again(
     mission.step(Observation(6.0, v.x, v.y, *flow, True), v)  # two hits: not a lone contact
     out = mission.step(Observation(16.0, v.x, v.y, *flow, False), v)  # lost; no cast legs
     assert PlumeLost(16.0, v.x, v.y, 6.0) in out.events
-    if sweeps:  # a new sweep from here: upflow (West), first across the flow to the far side (South)
+    if looks_again:  # a new leg from here
         assert out.state is MissionState.FIND
         assert out.waypoints is not None
-        assert out.waypoints[0] == Waypoint(50.0, AREA.y_centres[0])
+        (end,) = out.waypoints
+        assert math.dist((end.x, end.y), (v.x, v.y)) >= 5.0
     else:  # on as it was going: the same waypoints, so none are sent again
         assert out.state is MissionState.LOST
         assert out.waypoints is None
 
 
 @pytest.mark.parametrize(
-    ("lone_contact_hits", "hits", "sweeps_on"), [(0, 1, False), (1, 1, True), (1, 2, False)]
+    ("lone_contact_hits", "hits", "looks_on"), [(0, 1, False), (1, 1, True), (1, 2, False)]
 )
-def test_a_lone_detection_from_the_sweep_resumes_the_sweep(
-    lone_contact_hits: int, hits: int, sweeps_on: bool
+def test_a_lone_detection_in_find_goes_back_to_find(
+    lone_contact_hits: int, hits: int, looks_on: bool
 ) -> None:
     mapper = ScriptedMapper(AREA)
     mapper.peak_at(SOURCE, 0.05)
@@ -548,20 +551,23 @@ def test_a_lone_detection_from_the_sweep_resumes_the_sweep(
     mission = Mission(AREA, mapper, planning, NEVER)
     flow = (1.0, 0.0)
     v = VehicleState(90.0, -40.0)
-    swept = mission.step(Observation(0.0, v.x, v.y, *flow, False), v).waypoints
-    assert swept is not None  # the first sweep leg, North across the flow
+    mission.step(Observation(0.0, v.x, v.y, *flow, False), v)
+    leg = mission.step(Observation(1.0, v.x, v.y, *flow, False), v).waypoints
+    assert leg is not None  # the first leg
     v = VehicleState(90.0, -20.0)  # part way along it
     for k in range(hits):
         out = mission.step(Observation(5.0 + k, v.x, v.y, *flow, True), v)
         assert out.state is MissionState.TRACE
     last = 5.0 + hits - 1
-    wait = 4.0 if sweeps_on else 10.0  # a lone contact waits lone_contact_lost_after_s
+    wait = 4.0 if looks_on else 10.0  # a lone contact waits lone_contact_lost_after_s
     assert mission.step(Observation(last + wait - 0.5, v.x, v.y, *flow, False), v).state is MissionState.TRACE
     out = mission.step(Observation(last + wait, v.x, v.y, *flow, False), v)
     assert PlumeLost(last + wait, v.x, v.y, last) in out.events
-    if sweeps_on:  # back to the sweep, on to the turning point it was flying to
+    if looks_on:  # back to FIND: a new leg from here
         assert out.state is MissionState.FIND
-        assert out.waypoints == swept
+        assert out.waypoints is not None
+        (end,) = out.waypoints
+        assert math.dist((end.x, end.y), (v.x, v.y)) >= 5.0
         # a later contact is traced as before (and is not the mission's first)
         out = mission.step(Observation(30.0, v.x, v.y, *flow, True), v)
         assert out.state is MissionState.TRACE
@@ -569,31 +575,6 @@ def test_a_lone_detection_from_the_sweep_resumes_the_sweep(
     else:  # a cast across the flow through the last detection
         assert out.state is MissionState.LOST
         assert out.waypoints == (Waypoint(90.0, -10.0),)
-
-
-def test_a_start_near_the_upflow_edge_sweeps_downflow_first() -> None:
-    def second_leg(start_x: float, spacings: float) -> Waypoint:
-        """The end of the sweep's second leg: the first crosses the flow at the start's line."""
-        planning = PlanningConfig(zigzag_spacing_m=30.0, zigzag_near_edge_spacings=spacings)
-        mission = Mission(AREA, ScriptedMapper(AREA), planning, NEVER)
-        v = VehicleState(start_x, 10.0)
-        out = mission.step(Observation(0.0, v.x, v.y, 1.0, 0.0, False), v)  # flow East
-        assert out.waypoints is not None
-        assert out.waypoints[0].x == pytest.approx(start_x)
-        v = VehicleState(out.waypoints[0].x, out.waypoints[0].y)
-        out = mission.step(Observation(1.0, v.x, v.y, 1.0, 0.0, False), v)
-        assert out.waypoints is not None
-        return out.waypoints[0]
-
-    # 15 m from the upflow (West) edge: a spacing downflow with the rule, to the edge without it
-    assert second_leg(17.5, 1.0).x == pytest.approx(47.5)
-    assert second_leg(17.5, 0.0).x == pytest.approx(AREA.x_centres[0])
-    # a spacing or more from the edge, the sweep goes upflow either way
-    assert second_leg(47.5, 1.0) == second_leg(47.5, 0.0)
-    assert second_leg(47.5, 1.0).x == pytest.approx(17.5)
-    # "near" is set in spacings: 37.5 m from the edge is within 1.5 (45 m), not within 1.25
-    assert second_leg(40.0, 1.5).x == pytest.approx(70.0)
-    assert second_leg(40.0, 1.25).x == pytest.approx(10.0)
 
 
 def test_probes_beyond_an_obstacle_that_blocks_every_upflow_neighbour() -> None:
@@ -699,7 +680,8 @@ def test_odour_upflow_of_the_estimate_calls_the_check_off() -> None:
 
 @pytest.mark.parametrize("back_to", [MissionState.FIND, MissionState.LOST])
 def test_a_check_that_starts_outside_trace_is_flown_in_trace(back_to: MissionState) -> None:
-    # the rule fires while the mission sweeps again after a lone contact (FIND) or casts (LOST):
+    # the rule fires while the mission looks for the plume again after a lone contact (FIND) or
+    # casts (LOST):
     # the check is flown while tracing, whatever the state's own pattern was
     mapper = ScriptedMapper(AREA)
     mapper.peak_at(SOURCE, 0.05)
