@@ -172,20 +172,6 @@ class DeclarationConfig(_Section):
     guards (farrell2003, hmm + astar, 200 runs: 64 % -> 53.5 %)."""
     check_upflow_m: float = Field(default=3.0, gt=0)
     """How far upflow of the estimated cell's centre the check crosses the flow, m."""
-    steady_hit_rate: float = Field(default=0.75, ge=0, le=1)
-    """Skip the check when odour was detected in at least this share of the ticks the vehicle
-    spent near the estimate (``steady_radius_m``, over the last ``steady_window_s``), with the
-    other ``steady_*`` conditions met (0: off; ``planning.declaration.steady_odour``)."""
-    steady_window_s: float = Field(default=60.0, gt=0)
-    steady_radius_m: float = Field(default=2.5, gt=0)
-    steady_min_ticks: int = Field(default=10, ge=1)
-    """The least number of ticks near the estimate in the window for the share to count."""
-    steady_min_contact_s: float = Field(default=40.0, ge=0)
-    """How long since the mission's first odour, s, before the check may be skipped."""
-    steady_turn_window_s: float = Field(default=40.0, gt=0)
-    steady_max_turn_deg: float = Field(default=6.0, ge=0, le=180)
-    """The most the flow of the last ``steady_turn_window_s`` may have turned, on average, from
-    the mean flow, degrees: a plume being swung aside gives steady odour for a while too."""
 
     def for_mapper(self, mapper: str) -> DeclarationConfig:
         """This configuration as it applies to the mapper named ``mapper``: ``hmm_probability``,
@@ -268,10 +254,24 @@ def apply_override(data: dict[str, Any], path: list[str], value: Any, text: str)
     node[path[-1]] = value
 
 
+_ALWAYS_CHECK = "removed: the check across the flow is flown however steady the odour; delete the key"
 _NO_ZIGZAG = "removed: plume finding chooses its legs from the map (there is no zigzag); delete the key"
 RETIRED_KEYS = {
     "planning.zigzag_spacing_m": _NO_ZIGZAG,
     "planning.zigzag_near_edge_spacings": _NO_ZIGZAG,
+    **{
+        f"declaration.steady_{name}": "removed: the check across the flow is flown however steady the odour; "
+        "delete the key"
+        for name in (
+            "hit_rate",
+            "window_s",
+            "radius_m",
+            "min_ticks",
+            "min_contact_s",
+            "turn_window_s",
+            "max_turn_deg",
+        )
+    },
 }
 """Keys an earlier version read, and what to do about them (named instead of "unknown key")."""
 

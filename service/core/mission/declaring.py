@@ -1,21 +1,20 @@
-"""The mission's side of the declaration: arming the rule, the check across the flow, the
-steady-odour record and the probe upflow at the estimate. The rule itself is
+"""The mission's side of the declaration: arming the rule, the check across the flow and the
+probe upflow at the estimate. The rule itself is
 ``planning.declaration``'s (``Declarer``).
 
 With ``declaration.check_width_m`` > 0 a rule that fires first sends the vehicle across the flow
 ``check_upflow_m`` upflow of the estimate (``Check``), and the source is declared when that pass
 is flown; odour found upflow of the estimate, or another estimate, calls it off. A plume that
 swung off the vehicle's line looks to the maps like the upflow end of a plume; the check looks
-for it where it would be. Where the odour near the estimate has been steady (``steady_odour``)
-the check is skipped. At the estimate the vehicle probes upflow (``EstimateProbe``: the cell
-upflow, or with ``declaration.upflow_pass_m`` > 0 a point just beyond the upflow pass), so that
-the declaration's upflow pass is made.
+for it where it would be. Steady odour near the estimate does not make the check needless: a
+strong plume is smelt as steadily far downflow of its source. At the estimate the vehicle probes
+upflow (``EstimateProbe``: the cell upflow, or with ``declaration.upflow_pass_m`` > 0 a point just
+beyond the upflow pass), so that the declaration's upflow pass is made.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
@@ -26,7 +25,7 @@ from service.core.mission.events import CrossCheck, SourceDeclared
 from service.core.mission.pattern import ARRIVAL_M, Pattern
 from service.core.planning.base import Waypoint
 from service.core.planning.cast import cast_vertices
-from service.core.planning.declaration import Declarer, mass_within, steady_odour
+from service.core.planning.declaration import Declarer, mass_within
 from service.core.planning.safety import segment_clear
 
 if TYPE_CHECKING:
@@ -208,8 +207,8 @@ class EstimateProbe:
 
 class Declaring:
     """Judges each tick whether the source may be declared: the rule (``Declarer``, armed at the
-    first detection), then the check across the flow or the steady odour that vouches for the
-    cell. Owns the check and the probe at the estimate, the waypoints the declaration asks for.
+    first detection), then the check across the flow that vouches for the cell. Owns the check and
+    the probe at the estimate, the waypoints the declaration asks for.
 
     ``admit``: the declarer's filter of the cells it may name (``Declarer``; benchmarks only)."""
 
@@ -219,8 +218,6 @@ class Declaring:
         self._declarer = Declarer(grid, config, admit)
         self.check: Check | None = None  # the upflow check of a cell about to be declared
         self.probe = EstimateProbe(grid, config.upflow_pass_m)
-        self._recent: deque[Observation] = deque()  # the last ticks, for steady_odour
-        self._first_odour_s: float | None = None  # the mission's first detection (this run)
 
     @property
     def armed(self) -> bool:
@@ -229,18 +226,6 @@ class Declaring:
     def arm(self, time_s: float, likelihood: FloatArray) -> None:
         """Start judging (``Declarer.arm``): at the first detection, or on a restored map."""
         self._declarer.arm(time_s, likelihood)
-
-    def remember(self, obs: Observation) -> None:
-        """Keep this tick for ``steady_odour`` (only while the steady-odour test is enabled)."""
-        if obs.detected and self._first_odour_s is None:
-            self._first_odour_s = obs.time_s
-        c = self.config
-        if c.steady_hit_rate <= 0.0:
-            return
-        self._recent.append(obs)
-        keep_s = max(c.steady_window_s, c.steady_turn_window_s)
-        while self._recent and self._recent[0].time_s <= obs.time_s - keep_s:
-            self._recent.popleft()
 
     def recheck(self, obs: Observation, likelihood: FloatArray) -> None:
         """Call the check off if this tick's odour or estimate says so."""
@@ -289,15 +274,13 @@ class Declaring:
         return waypoints
 
     def _vouch(self, found: Declaration, frame: FlowFrame | None) -> CrossCheck | Check | None:
-        """How ``found`` may be declared now without the upflow check (off, or steady odour); else
-        the check of its cell, started now, or None while it goes on."""
+        """How ``found`` may be declared now without the upflow check (off); else the check of its
+        cell, started now, or None while it goes on."""
         c = self.config
         if c.check_width_m <= 0.0 or frame is None:
             return CrossCheck.OFF
         if self.check is not None and self.check.cell == found.cell:
             return None
-        if steady_odour(self._recent, found.x, found.y, self._first_odour_s, (frame.ux, frame.uy), c):
-            return CrossCheck.STEADY  # a source, not a plume swung over it
         self.check = Check.across(self.grid, found, frame, c)
         self.probe.detour = None
         return self.check

@@ -45,7 +45,6 @@ class CrossCheck(StrEnum):
     """How a declared cell was vouched for by the check across the flow (``check_width_m``)."""
 
     FLOWN = "flown"  # flown, no odour upflow
-    STEADY = "steady"  # skipped: the odour near the cell had been steady (``steady_odour``)
     OFF = "off"  # no check configured (or no flow direction yet)
 
 

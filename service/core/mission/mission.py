@@ -122,9 +122,7 @@ class Mission:
 
     def restore_state(self, state: dict[str, Any]) -> None:
         """Continue in the phase ``save_state`` saved; a leg or cast pattern is laid out anew,
-        and past the first detection the declaration rule is re-armed from the restored map.
-        The steady-odour record is not saved: it starts afresh, so no check is skipped until it
-        has filled again (``steady_min_contact_s`` after the next odour)."""
+        and past the first detection the declaration rule is re-armed from the restored map."""
         phase = MissionState(state["phase"])
         self._last_time = None if state["last_time"] is None else float(state["last_time"])
         t = state["last_detection_t"]
@@ -142,7 +140,6 @@ class Mission:
         self._last_time = obs.time_s
         self.mapper.update(obs)
         self._update_mean_flow(obs)
-        self._declaring.remember(obs)
         estimate = self.mapper.estimate()
         events = self._advance(obs)
         if self._state is MissionState.DECLARED:

@@ -31,13 +31,6 @@ swung away, odour was there only while it passed. The guard does not depend on h
 looks upflow, so the mission's probe can fly on until the upflow pass is made without the wrong
 declarations that easing the pass otherwise brings.
 
-With ``steady_hit_rate`` > 0 the mission may skip the check across the flow (``check_width_m``)
-when the odour near the estimate has been steady (``steady_odour``). A source releases all the
-time where it is, so a vehicle kept near it smells it in most ticks; a meander that swung the
-plume over a place leaves odour there only part of the time. The look across the flow is what
-tells a swung plume from a source, and it costs about 24 s at 1 m/s: where the odour has been
-steady for long enough, under a flow that has not just turned, it is taken as the answer.
-
 The estimate is the cell of greatest likelihood (the mapper's ``estimate``); ties go to the
 lowest flat index, as ``numpy.argmax`` does.
 """
@@ -45,7 +38,7 @@ lowest flat index, as ``numpy.argmax`` does.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -55,7 +48,6 @@ if TYPE_CHECKING:
     from service.core.config import DeclarationConfig
     from service.core.grid import Grid
     from service.core.mapping.belief import FloatArray
-    from service.core.observation import Observation
 
 
 @dataclass(frozen=True)
@@ -70,44 +62,6 @@ class Declaration:
     y: float
     probability: float
     mass: float
-
-
-def steady_odour(
-    samples: Sequence[Observation],
-    x: float,
-    y: float,
-    first_odour_s: float | None,
-    flow_direction: tuple[float, float],
-    config: DeclarationConfig,
-) -> bool:
-    """Whether the odour at (x, y) has been steady enough to name it without the check across the
-    flow: over the last ``steady_window_s`` the vehicle spent at least ``steady_min_ticks`` ticks
-    within ``steady_radius_m`` of it and smelled odour in at least ``steady_hit_rate`` of them;
-    the mission's first odour came at least ``steady_min_contact_s`` ago; and the flow of the last
-    ``steady_turn_window_s`` has turned, on average, no more than ``steady_max_turn_deg`` from
-    ``flow_direction`` (the mean flow, a unit vector). ``samples`` are the mission's ticks in time
-    order, the newest last (this tick). Always False with ``steady_hit_rate`` 0."""
-    c = config
-    if c.steady_hit_rate <= 0.0 or not samples or first_odour_s is None:
-        return False
-    now = samples[-1].time_s
-    if now - first_odour_s < c.steady_min_contact_s - 1e-9:
-        return False
-    near = [
-        s
-        for s in samples
-        if s.time_s > now - c.steady_window_s and math.hypot(s.x - x, s.y - y) < c.steady_radius_m
-    ]
-    odour = [s.time_s for s in near if s.detected]
-    if len(near) < c.steady_min_ticks or len(odour) < c.steady_hit_rate * len(near) - 1e-9:
-        return False
-    ux, uy = flow_direction
-    turns = [
-        math.atan2(s.flow_y * ux - s.flow_x * uy, s.flow_x * ux + s.flow_y * uy)
-        for s in samples
-        if s.time_s > now - c.steady_turn_window_s
-    ]
-    return abs(math.degrees(sum(turns) / len(turns))) <= c.steady_max_turn_deg
 
 
 def mass_within(grid: Grid, likelihood: FloatArray, cell: int, radius_m: float) -> float:

@@ -36,9 +36,12 @@ def test_unknown_key_is_named(tmp_path: Path) -> None:
         load_config(write(tmp_path, "[area]\ncolums = 10\n"))
 
 
-def test_a_removed_key_says_what_to_do(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match=r"planning\.zigzag_spacing_m: removed: .*delete the key"):
-        load_config(write(tmp_path, "[planning]\nzigzag_spacing_m = 30.0\n"))
+@pytest.mark.parametrize(
+    ("section", "key"), [("planning", "zigzag_spacing_m"), ("declaration", "steady_hit_rate")]
+)
+def test_a_removed_key_says_what_to_do(tmp_path: Path, section: str, key: str) -> None:
+    with pytest.raises(ConfigError, match=rf"{section}\.{key}: removed: .*delete the key"):
+        load_config(write(tmp_path, f"[{section}]\n{key} = 0.5\n"))
 
 
 def test_unknown_section_is_named(tmp_path: Path) -> None:

@@ -26,7 +26,6 @@ CONFIG = DeclarationConfig(
     check_width_m=6.0,
     check_upflow_m=3.0,
     persist_s=0.0,
-    steady_hit_rate=0.0,
 )
 ROUTING = Routing.of(AREA, PlanningConfig())
 

@@ -1,20 +1,15 @@
-import math
-
 import numpy as np
 import pytest
 
 from service.core.config import DeclarationConfig
 from service.core.grid import Grid
-from service.core.observation import Observation
-from service.core.planning.declaration import Declarer, mass_within, steady_odour
+from service.core.planning.declaration import Declarer, mass_within
 
 G = Grid(0.0, 5.0, 0.0, 5.0, columns=5, rows=5)  # 1 m cells
 
-PAPERS_DECLARATION = DeclarationConfig(
-    upflow_pass_m=0.0, check_width_m=0.0, persist_s=0.0, steady_hit_rate=0.0
-)
+PAPERS_DECLARATION = DeclarationConfig(upflow_pass_m=0.0, check_width_m=0.0, persist_s=0.0)
 """The declaration these tests were written against: the papers' rules without the later guards
-(no upflow pass, check across the flow, persistence or steady-odour test); each test turns on
+(no upflow pass, check across the flow or persistence test); each test turns on
 the one it is about."""
 
 
@@ -166,37 +161,3 @@ def test_admit_ignores_a_rule_for_a_refused_cell() -> None:
     found = admitted.update(1.0, peaked(12, 0.6))
     assert found is not None
     assert found.cell == 12
-
-
-def odour_record(hits: list[bool], x: float = 0.0) -> list[Observation]:
-    """One tick a second at (x, 0) under a flow East, odour as ``hits`` says."""
-    return [Observation(float(t), x, 0.0, 1.0, 0.0, hit) for t, hit in enumerate(hits)]
-
-
-STEADY = DeclarationConfig(steady_hit_rate=0.75)
-
-
-def test_steady_odour_asks_for_the_share_the_ticks_and_the_time_since_contact() -> None:
-    four_in_five = [t % 5 != 4 for t in range(60)]
-    assert steady_odour(odour_record(four_in_five), 0.0, 0.0, 0.0, (1.0, 0.0), STEADY)
-    # the window is the last 60 s: 40 dry seconds before it do not count
-    assert steady_odour(odour_record([False] * 40 + four_in_five), 0.0, 0.0, 0.0, (1.0, 0.0), STEADY)
-    assert not steady_odour(odour_record([t % 3 != 2 for t in range(60)]), 0.0, 0.0, 0.0, (1.0, 0.0), STEADY)
-    assert not steady_odour(
-        odour_record(four_in_five), 0.0, 0.0, 25.0, (1.0, 0.0), STEADY
-    )  # contact 35 s ago
-    assert not steady_odour(odour_record(four_in_five), 0.0, 0.0, None, (1.0, 0.0), STEADY)
-    # 2.5 m away: none of the ticks is near the place
-    assert not steady_odour(odour_record(four_in_five, x=2.5), 0.0, 0.0, 0.0, (1.0, 0.0), STEADY)
-    nine = odour_record([True] * 9)
-    assert not steady_odour(nine, 0.0, 0.0, -40.0, (1.0, 0.0), STEADY)  # fewer than 10 ticks near it
-    assert steady_odour(nine, 0.0, 0.0, -40.0, (1.0, 0.0), STEADY.model_copy(update={"steady_min_ticks": 9}))
-
-
-def test_steady_odour_is_refused_under_a_turned_flow_on_by_default_and_off_at_0() -> None:
-    record = odour_record([True] * 60)
-    assert steady_odour(record, 0.0, 0.0, 0.0, (math.cos(0.1), math.sin(0.1)), STEADY)  # 5.7 degrees
-    assert not steady_odour(record, 0.0, 0.0, 0.0, (math.cos(0.11), math.sin(0.11)), STEADY)  # 6.3
-    assert DeclarationConfig().steady_hit_rate == 0.75
-    assert steady_odour(record, 0.0, 0.0, 0.0, (1.0, 0.0), DeclarationConfig())
-    assert not steady_odour(record, 0.0, 0.0, 0.0, (1.0, 0.0), PAPERS_DECLARATION)
