@@ -260,8 +260,7 @@ RETIRED_KEYS = {
     "planning.zigzag_spacing_m": _NO_ZIGZAG,
     "planning.zigzag_near_edge_spacings": _NO_ZIGZAG,
     **{
-        f"declaration.steady_{name}": "removed: the check across the flow is flown however steady the odour; "
-        "delete the key"
+        f"declaration.steady_{name}": _ALWAYS_CHECK
         for name in (
             "hit_rate",
             "window_s",
