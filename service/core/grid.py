@@ -145,6 +145,14 @@ class Grid:
         j = min(max(j, 1), self.rows)
         return self.rows - j
 
+    def rows_columns_of(
+        self, x: npt.NDArray[np.float64], y: npt.NDArray[np.float64]
+    ) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+        """``row_of`` and ``column_of`` of many points at once (the same boundary rule, clamped)."""
+        col = np.clip(np.ceil((x - self.x_min) / self.cell_width_m) - 1, 0, self.columns - 1)
+        row = self.rows - np.clip(np.ceil((self.y_max - y) / self.cell_height_m), 1, self.rows)
+        return row.astype(np.intp), col.astype(np.intp)
+
     def cell_of(self, x: float, y: float) -> int:
         """Flat index of the cell holding (x, y); OutsideAreaError outside the area."""
         if not (math.isfinite(x) and math.isfinite(y)) or not self.contains(x, y):

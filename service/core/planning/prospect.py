@@ -67,9 +67,7 @@ def leg_cells(
     t = np.arange(1, count + 1, dtype=float) / count
     x = start[0] + t * (end[0] - start[0])
     y = start[1] + t * (end[1] - start[1])
-    col = np.clip(np.ceil((x - grid.x_min) / grid.cell_width_m) - 1, 0, grid.columns - 1)
-    row = grid.rows - np.clip(np.ceil((grid.y_max - y) / grid.cell_height_m), 1, grid.rows)
-    return np.stack([row, col], axis=1).astype(np.intp)
+    return np.stack(grid.rows_columns_of(x, y), axis=1)
 
 
 def odour_chances(

@@ -120,3 +120,13 @@ def test_the_widened_grid_holds_every_offset_around_its_centre_cell() -> None:
     assert wide.centre(centre) == grid.centre(0)
     row, col = wide.row_col(wide.cell_of(*grid.centre(grid.size - 1)))
     assert (row, col) == (4, 6)
+
+
+def test_rows_and_columns_of_many_points_follow_the_one_point_rule() -> None:
+    grid = Grid(0.0, 10.0, -4.0, 2.0, columns=4, rows=3)
+    # boundaries (western / northern cell), the corners and points beyond the area (clamped)
+    x = np.array([0.0, 2.5, 2.6, 10.0, -3.0, 12.0, 7.4])
+    y = np.array([2.0, -2.0, -2.1, -4.0, 5.0, -9.0, 0.3])
+    rows, cols = grid.rows_columns_of(x, y)
+    assert rows.tolist() == [grid.row_of(v) for v in y]
+    assert cols.tolist() == [grid.column_of(v) for v in x]
