@@ -2,7 +2,7 @@
 
 The public names live here. The parts: ``mission`` the state machine, ``transitions`` its
 table, ``prospect`` (FIND) and ``cast`` (LOST) the behaviours with their own patterns,
-``declaring`` the declaration's mission side (the check across the flow, the probe upflow at the
+``declaring`` the declaration's mission side (the check across the flow, the probe at the
 estimate), ``pattern`` turning points flown in order, ``routing`` paths with their fallbacks,
 ``emitter`` the safety rule on every waypoint that leaves, ``events`` what a tick reports.
 """

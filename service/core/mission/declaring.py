@@ -1,5 +1,5 @@
 """The mission's side of the declaration: arming the rule, the check across the flow and the
-probe upflow at the estimate. The rule itself is
+probe at the estimate. The rule itself is
 ``planning.declaration``'s (``Declarer``).
 
 With ``declaration.check_width_m`` > 0 a rule that fires first sends the vehicle across the flow
@@ -8,8 +8,9 @@ is flown; odour found upflow of the estimate, or another estimate, calls it off.
 swung off the vehicle's line looks to the maps like the upflow end of a plume; the check looks
 for it where it would be. Steady odour near the estimate does not make the check needless: a
 strong plume is smelt as steadily far downflow of its source. At the estimate the vehicle probes
-upflow (``EstimateProbe``: the cell upflow, or with ``declaration.upflow_pass_m`` > 0 a point just
-beyond the upflow pass), so that the declaration's upflow pass is made.
+(``EstimateProbe``): with ``declaration.upflow_pass_m`` > 0 first to a point just beyond the
+upflow pass, so that the declaration's upflow pass is made; then to the nearby cell where one more
+observation tells the most about the source (``planning.probe``, eq. I1).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from service.core.mission.pattern import ARRIVAL_M, Pattern
 from service.core.planning.base import Waypoint
 from service.core.planning.cast import cast_vertices
 from service.core.planning.declaration import Declarer, mass_within
+from service.core.planning.probe import information
 from service.core.planning.safety import segment_clear
 
 if TYPE_CHECKING:
@@ -45,10 +47,11 @@ PASS_PROBE_REACHED_M = 0.3
 """The upflow pass probe's point counts as reached this close to it."""
 STOPPED_M = 0.05
 """A vehicle that moved less than this in a tick has stopped (an autopilot inside its acceptance radius)."""
-UPFLOW_PROBES: tuple[tuple[int, int], ...] = tuple(
-    (d_row, d_col) for d_row in (-1, 0, 1) for d_col in (-1, 0, 1) if (d_row, d_col) != (0, 0)
-)
-"""(row, column) offsets of the eight neighbours a probe upflow chooses from."""
+
+
+PROBE_REACH = 2
+"""The probe at the estimate chooses among the cells within this many rows and columns of the
+vehicle's (a tick or two away), and the first free cell upflow beyond an obstacle."""
 
 
 @dataclass
@@ -95,14 +98,16 @@ class Check:
 
 @dataclass
 class EstimateProbe:
-    """The look upflow at the estimate, for the declaration's upflow pass.
+    """The look around the estimate, for the declaration's upflow pass and for the map.
 
     At the estimate (or as near as it can be reached, beside an obstacle) and not yet declared,
     staying put only repeats one observation (odour there is explained as well by any source
-    upflow), so the vehicle probes upflow: odour there rules the vehicle's cell out, none there
-    rules the cells upflow out. ``pass_target``: (estimate, point) of the probe just beyond the
-    upflow pass, flown until reached, made or the estimate moves; ``detour``: a probe cell beyond
-    an obstacle, flown until reached."""
+    upflow). With ``upflow_pass_m`` > 0 the vehicle first flies just beyond the upflow pass
+    (``pass_target``: (estimate, point), flown until reached, made or the estimate moves). After
+    that it probes the cell, within ``PROBE_REACH`` cells or first free upflow beyond an
+    obstacle, where the next observation is worth most (eq. I1): downflow of the estimate when
+    the map's rival lies downflow, upflow or beside it when the rival lies there. A probe beyond
+    an obstacle is a ``detour``, flown until reached."""
 
     grid: Grid
     upflow_pass_m: float
@@ -141,10 +146,16 @@ class EstimateProbe:
         if point is not None:
             self.pass_target = (ctx.goal, point)
             return (point,)
-        probe = self._upflow_neighbour(ctx.cell, frame)
+        if frame is None:
+            return None
+        probe = self._informative(ctx, self._upflow_beyond(ctx.cell, frame, routing.reach))
         if probe is None:
-            probe = self.detour = self._upflow_beyond(ctx.cell, frame, routing.reach)
-        return None if probe is None else routing.to_cell(ctx, probe)
+            return None
+        row, col = self.grid.row_col(ctx.cell)
+        probe_row, probe_col = self.grid.row_col(probe)
+        if max(abs(probe_row - row), abs(probe_col - col)) > PROBE_REACH:
+            self.detour = probe
+        return routing.to_cell(ctx, probe)
 
     def _pass_point(self, ctx: PlanContext, frame: FlowFrame | None, passed_upflow: bool) -> Waypoint | None:
         """The point just beyond the upflow pass of the estimate, if the pass is still to be made
@@ -160,34 +171,32 @@ class EstimateProbe:
             return None
         return target
 
-    def _upflow_neighbour(self, cell: int, frame: FlowFrame | None) -> int | None:
-        """The free neighbour of ``cell`` most nearly upflow (against the mean flow), if any."""
-        if frame is None:
-            return None
+    def _informative(self, ctx: PlanContext, beyond: int | None) -> int | None:
+        """The free cell within ``PROBE_REACH`` rows and columns of the vehicle's (its own
+        excepted), or ``beyond``, where one more observation tells the most about the source
+        (eq. I1 over the mapper's own odour kernel); None when there is no such cell."""
         grid = self.grid
-        row, col = grid.row_col(cell)
-        cx, cy = grid.centre(cell)
-        best, best_cos = None, 0.0
-        for d_row, d_col in UPFLOW_PROBES:
-            r, c = row + d_row, col + d_col
-            if not (0 <= r < grid.rows and 0 <= c < grid.columns):
-                continue
-            neighbour = r * grid.columns + c
-            if grid.obstacle_mask.flat[neighbour]:
-                continue
-            nx, ny = grid.centre(neighbour)
-            dx, dy = nx - cx, ny - cy
-            cos = -(dx * frame.ux + dy * frame.uy) / math.hypot(dx, dy)
-            if cos > best_cos + 1e-9:
-                best, best_cos = neighbour, cos
-        return best
+        row, col = grid.row_col(ctx.cell)
+        offsets = np.arange(-PROBE_REACH, PROBE_REACH + 1)
+        rows, cols = (a.ravel() for a in np.meshgrid(row + offsets, col + offsets, indexing="ij"))
+        inside = (rows >= 0) & (rows < grid.rows) & (cols >= 0) & (cols < grid.columns)
+        rows, cols = rows[inside], cols[inside]
+        keep = ~grid.obstacle_mask[rows, cols] & ((rows != row) | (cols != col))
+        cells = np.stack([rows[keep], cols[keep]], axis=1)
+        if beyond is not None:
+            cells = np.vstack([cells, grid.row_col(beyond)])
+        if cells.size == 0:
+            return None
+        mapper = ctx.mapper
+        gain = information(mapper.likelihood, mapper.odour_kernel(), mapper.params.false_alarm, cells)
+        best_row, best_col = cells[int(np.argmax(gain))]
+        return int(best_row) * grid.columns + int(best_col)
 
     def _upflow_beyond(self, cell: int, frame: FlowFrame | None, reach: Reachability) -> int | None:
-        """The first free cell reachable from ``cell`` on the line upflow of its centre, if any.
-
-        Used when every upflow neighbour is blocked (the vehicle stands against the downflow face
-        of an obstacle): the plume may cross the obstacle, and only a look beyond it tells a
-        source behind it from one in the vehicle's cell."""
+        """The first free cell reachable from ``cell`` on the line upflow of its centre, if any: the
+        upflow neighbour, or against the downflow face of an obstacle the first cell beyond it (the
+        plume may cross the obstacle, and only a look beyond it tells a source behind it from one
+        in the vehicle's cell)."""
         if frame is None:
             return None
         grid = self.grid

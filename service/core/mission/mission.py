@@ -6,8 +6,8 @@ tracing, and source declaration". The states, each flown by its own behaviour:
 - ``FIND`` (published as ``search``): no detection yet; straight legs, each the one the map
   expects odour on most often per metre (``Prospect``).
 - ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate; the
-  declaration's legs (``Declaring``: the check across the flow, the probe upflow at the
-  estimate) go first.
+  declaration's legs (``Declaring``: the check across the flow, the probe at the estimate) go
+  first.
 - ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
   last detection (``Cast``), then the planner again. A detection returns to ``TRACE``.
   With ``flat_map_ratio`` > 0, a cast that ends with a map holding no evidence goes back to

@@ -21,8 +21,8 @@ explained as well by a source there as by any source upflow; in a flow that vari
 mappers' drift lines from successive detections meet near the vehicle, so a map can gather its
 mass where the vehicle is while it is still in the plume, far downflow of the source. Only a look
 upflow tells them apart: odour there moves the estimate on (and restarts the wait), none there
-leaves it. The mission's trace behaviour probes the upflow neighbour whenever the vehicle is at
-the estimate, so the pass comes without a change of planner.
+leaves it. The mission's trace behaviour flies just beyond the pass whenever the vehicle is at an
+estimate whose pass is still to be made, so the pass comes without a change of planner.
 
 With ``persist_s`` > 0 the rule does not fire until odour has been detected within ``visit_radius_m`` of
 the estimated cell's centre at two times at least ``persist_s`` apart. A source keeps releasing

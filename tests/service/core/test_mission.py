@@ -576,14 +576,18 @@ def test_a_lone_detection_in_find_goes_back_to_find(
 
 
 def test_probes_beyond_an_obstacle_that_blocks_every_upflow_neighbour() -> None:
-    # the estimate is the vehicle's own cell, against the downflow face of a wall: the mission
-    # flies round the wall to the first free cell upflow instead of holding at the face
+    # the estimate is the vehicle's own cell, against the downflow face of a wall, and the map's
+    # rival lies upflow beyond the wall: only a look beyond the wall tells them apart, so the
+    # mission flies round the wall to the first free cell upflow instead of holding at the face
     grid = Grid(0.0, 100.0, -50.0, 50.0, columns=20, rows=20, obstacles=((40.0, -10.0, 50.0, 10.0),))
     here = grid.cell_of(52.5, 2.5)
     beyond = grid.cell_of(37.5, 2.5)
     assert grid.obstacle_mask.flat[grid.cell_of(47.5, 2.5)]
     mapper = ScriptedMapper(grid)
-    mapper.peak_at(here)
+    pi = np.zeros(grid.shape)
+    pi.flat[here] = 0.55
+    pi.flat[grid.cell_of(32.5, 2.5)] = 0.45
+    mapper.set(pi)
     mission = Mission(grid, mapper, PlanningConfig(), NEVER)
     vehicle = Vehicle(*grid.centre(here))
     visited = set()
@@ -738,7 +742,7 @@ def test_a_new_estimate_calls_the_check_off() -> None:
 
 
 @pytest.mark.parametrize("pass_m", [0.0, 2.0])
-def test_the_probe_upflow_flies_until_the_upflow_pass_is_made(pass_m: float) -> None:
+def test_the_pass_probe_flies_until_the_upflow_pass_is_made(pass_m: float) -> None:
     mapper = ScriptedMapper(AREA)
     mapper.peak_at(SOURCE, 0.5)
     decl = DeclarationConfig(probability=1.0, upflow_pass_m=pass_m)  # the rule never fires
@@ -749,8 +753,11 @@ def test_the_probe_upflow_flies_until_the_upflow_pass_is_made(pass_m: float) -> 
     out = mission.step(Observation(0.0, v.x, v.y, *flow, True), v)  # at the estimate, in odour
     assert out.waypoints is not None
     point = Waypoint(cx - 2.25, cy)  # just beyond the 2 m pass
-    if pass_m == 0.0:  # no pass to make: the cell upflow, its centre 5 m upflow
-        assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)
+    # the cell probe: with half the map on the estimate and the rest spread thin, odour just
+    # downflow of it (East) tells the most (ScriptedMapper's odour reaches East along a row)
+    probe = AREA.centre(SOURCE + 1)
+    if pass_m == 0.0:  # no pass to make: the cell probe at once
+        assert (out.waypoints[-1].x, out.waypoints[-1].y) == probe
         return
     assert out.waypoints == (point,)
     v = VehicleState(cx - 1.5, cy)  # on the way, still in the estimated cell: keep going
@@ -760,7 +767,7 @@ def test_the_probe_upflow_flies_until_the_upflow_pass_is_made(pass_m: float) -> 
     v = VehicleState(cx - 2.25, cy)  # there: the pass is made, so the cell probe takes over
     out = mission.step(Observation(2.0, v.x, v.y, *flow, False), v)
     assert out.waypoints is not None
-    assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)
+    assert (out.waypoints[-1].x, out.waypoints[-1].y) == probe
 
 
 def test_a_vehicle_that_stops_short_of_the_pass_probe_has_made_the_pass() -> None:
@@ -779,7 +786,7 @@ def test_a_vehicle_that_stops_short_of_the_pass_probe_has_made_the_pass() -> Non
     assert out.waypoints is None  # still on its way, as far as the mission can tell
     out = mission.step(Observation(2.0, v.x, v.y, *flow, False), v)  # it has not moved: stopped
     assert out.waypoints is not None
-    assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE - 1)  # the cell probe
+    assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE + 1)  # the cell probe
 
 
 def odour_mission(hits: list[bool], turn: float = 0.0) -> MissionOutput:

@@ -1,5 +1,5 @@
 """The declaration's mission side: the check across the flow (its legs and its call-off rule),
-the judgement that starts it and declares after it, and the probe upflow at the estimate."""
+the judgement that starts it and declares after it, and the probe at the estimate."""
 
 import numpy as np
 
@@ -127,12 +127,40 @@ def test_the_check_legs_go_before_the_probe() -> None:
 # -- the probe at the estimate ------------------------------------------------------------------
 
 
-def test_at_the_estimate_the_probe_goes_to_the_cell_upflow() -> None:
+class SplitMapper(HmmMapper):
+    """A map split between two cells, and odour that reaches a source's own cell and every cell
+    downflow (east) of it in its row, detected half the time."""
+
+    def __init__(self, cells: tuple[int, int]) -> None:
+        super().__init__(AREA)
+        self._pi = np.zeros(AREA.shape)
+        for cell in cells:
+            self._pi.flat[cell] = 0.5
+
+    def odour_kernel(self) -> FloatArray:
+        n, m = AREA.shape
+        kernel = np.zeros((2 * n - 1, 2 * m - 1))
+        kernel[n - 1, :m] = 0.5  # source - vehicle: the same row, zero or more columns west
+        return kernel
+
+
+def probe_cell(mapper: SplitMapper) -> int | None:
+    ctx = PlanContext(VehicleState(SX, SY, 0.0), SOURCE, SOURCE, mapper)
+    waypoints = EstimateProbe(AREA, upflow_pass_m=0.0).waypoints(ctx, ROUTING, EAST, passed_upflow=False)
+    return None if waypoints is None else AREA.cell_of(waypoints[-1].x, waypoints[-1].y)
+
+
+def test_at_the_estimate_the_probe_looks_where_the_rivals_disagree() -> None:
+    # the rival two cells downflow: only just downflow of the estimate does odour tell them apart
+    assert probe_cell(SplitMapper((SOURCE, SOURCE + 2))) == SOURCE + 1
+    # the rival two cells upflow: the cells from it to the estimate smell it and not the estimate
+    assert probe_cell(SplitMapper((SOURCE - 2, SOURCE))) in (SOURCE - 2, SOURCE - 1)
+
+
+def test_away_from_the_estimate_or_without_a_flow_there_is_no_probe() -> None:
     probe = EstimateProbe(AREA, upflow_pass_m=0.0)
-    waypoints = probe.waypoints(ctx_at(SX, SY), ROUTING, EAST, passed_upflow=False)
-    assert waypoints is not None
-    assert AREA.cell_of(waypoints[-1].x, waypoints[-1].y) == SOURCE - 1  # the West neighbour
-    assert probe.waypoints(ctx_at(SX + 20.0, SY), ROUTING, EAST, passed_upflow=False) is None  # not there
+    assert probe.waypoints(ctx_at(SX + 20.0, SY), ROUTING, EAST, passed_upflow=False) is None
+    assert probe.waypoints(ctx_at(SX, SY), ROUTING, None, passed_upflow=False) is None
 
 
 def test_the_pass_probe_flies_just_beyond_the_upflow_pass_until_it_is_made() -> None:

@@ -129,8 +129,8 @@ def test_all_and_repeated_names() -> None:
 
 
 # the papers' scenarios release the plume with the mission; the search assumes an older plume and
-# finds about a third of the wang-turbulent sources in 300 s (README), not those of seeds 0 and 1
-@pytest.mark.parametrize(("scenario", "seed"), [("wang-laminar", 0), ("wang-turbulent", 2)])
+# finds about a third of the wang-turbulent sources in 300 s (README), not those of seeds 0 to 2
+@pytest.mark.parametrize(("scenario", "seed"), [("wang-laminar", 0), ("wang-turbulent", 3)])
 def test_a_seeded_mission_finds_the_source(scenario: str, seed: int) -> None:
     configured = search.configure(scenario, "pomdp", "astar")
     r = run_mission(configured, seed, record=True)
@@ -156,7 +156,7 @@ def test_a_seeded_mission_finds_the_source(scenario: str, seed: int) -> None:
     assert (again.time_s, again.declared_x, again.path_m) == (r.time_s, r.declared_x, r.path_m)
 
 
-@pytest.mark.parametrize(("scenario", "seed"), [("wang-laminar", 0), ("wang-turbulent", 3)])
+@pytest.mark.parametrize(("scenario", "seed"), [("wang-laminar", 0), ("wang-turbulent", 2)])
 def test_a_vehicle_that_stops_half_a_metre_short_of_its_targets_still_declares(
     scenario: str, seed: int
 ) -> None:
@@ -185,13 +185,13 @@ def test_command_prints_one_json_object_per_configuration(capsys: pytest.Capture
 
 def test_oracle_declaration_ignores_a_wrong_declaration() -> None:
     # farrell2003 seed 0 with every guard of the declaration off but the mass (and that at 0.5) names
-    # (60.625, -3), 41 m from the source, at 97 s; the perfect guard ignores that cell and goes on
+    # (64.375, -3), 44 m from the source; the perfect guard ignores that cell and goes on
     unguarded = ["declaration.check_width_m=0", "declaration.persist_s=0",
                  "declaration.upflow_pass_m=0", "declaration.probability=0.5"]  # fmt: skip
     scenario = search.configure("farrell2003", "pomdp", "astar", unguarded)
     plain = run_mission(scenario, 0, max_time_s=120.0)
     assert plain.wrong
-    assert plain.declared_x == pytest.approx(60.625)
+    assert plain.declared_x == pytest.approx(64.375)
     oracle = run_mission(scenario, 0, max_time_s=120.0, oracle=True)
     assert not oracle.wrong
     if oracle.declared_x is not None and oracle.declared_y is not None:
