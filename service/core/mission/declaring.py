@@ -69,9 +69,18 @@ class Check:
 
     @classmethod
     def across(cls, grid: Grid, found: Declaration, frame: FlowFrame, config: DeclarationConfig) -> Check:
-        """Two legs ``check_width_m`` to each side across the flow, ``check_upflow_m`` upflow."""
+        """Two legs ``check_width_m`` to each side across the flow, ``check_upflow_m`` upflow; or,
+        when that point lies in an obstacle, just upflow of the obstacle: a plume that crosses the
+        obstacle cannot be met beside it, only beyond it."""
         upflow = config.check_upflow_m
         ax, ay = found.x - upflow * frame.ux, found.y - upflow * frame.uy
+        step_m = 0.5 * min(grid.cell_width_m, grid.cell_height_m)
+        beyond = upflow
+        while grid.in_obstacle(found.x - beyond * frame.ux, found.y - beyond * frame.uy):
+            beyond += step_m
+        bx, by = found.x - beyond * frame.ux, found.y - beyond * frame.uy
+        if beyond > upflow and grid.contains(bx, by):
+            ax, ay = bx, by
         legs = cast_vertices(grid, ax, ay, frame, config.check_width_m, 2)
         return cls(found, frame, 0.5 * upflow, Pattern(legs))
 

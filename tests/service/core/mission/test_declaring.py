@@ -57,6 +57,19 @@ def test_the_check_crosses_the_flow_upflow_of_the_cell() -> None:
     assert check.cancel_upflow_m == 1.5
 
 
+def test_a_check_whose_line_lies_in_an_obstacle_crosses_the_flow_just_upflow_of_it() -> None:
+    # the estimate (centre x = 22.5) 2.5 m from the downflow face of a wall 11 m deep: 3 m upflow is
+    # inside the wall, where a plume crossing it cannot be met, so the check crosses beyond it
+    walled = Grid(0.0, 100.0, -50.0, 50.0, columns=20, rows=20, obstacles=((9.0, -10.0, 20.0, 10.0),))
+    found = Declaration(0.0, SOURCE, walled.paper_number(SOURCE), SX, SY, 0.9, 0.9)
+    check = Check.across(walled, found, EAST, CONFIG)
+    (first, second) = check.pattern.vertices
+    assert first.x == second.x
+    assert 6.5 <= first.x < 9.0  # within a step (half a 5 m cell) of the wall's upflow face
+    assert (first.y, second.y) == (SY + 6.0, SY - 6.0)
+    assert check.cancel_upflow_m == 1.5  # odour 1.5 m upflow of the estimate still calls it off
+
+
 def test_odour_far_enough_upflow_or_another_estimate_calls_the_check_off() -> None:
     check = Check.across(AREA, found_at_source(), EAST, CONFIG)
     assert check.holds(odour(1.0, SX - 1.0, SY), SOURCE)  # odour nearer than 1.5 m upflow
