@@ -109,17 +109,23 @@ class Check:
 class EstimateProbe:
     """The look around the estimate, for the declaration's upflow pass and for the map.
 
-    At the estimate (or as near as it can be reached, beside an obstacle) and not yet declared,
-    staying put only repeats one observation (odour there is explained as well by any source
-    upflow). With ``upflow_pass_m`` > 0 the vehicle first flies just beyond the upflow pass
-    (``pass_target``: (estimate, point), flown until reached, made or the estimate moves). After
-    that it probes the cell, within ``PROBE_REACH`` cells or first free upflow beyond an
-    obstacle, where the next observation is worth most (eq. I1): downflow of the estimate when
-    the map's rival lies downflow, upflow or beside it when the rival lies there. A probe beyond
-    an obstacle is a ``detour``, flown until reached."""
+    Within ``near_m`` of the estimate (or in the cell nearest it that can be reached, beside an
+    obstacle) and not yet declared, staying put only repeats one observation (odour there is
+    explained as well by any source upflow). With ``upflow_pass_m`` > 0 the vehicle first flies
+    just beyond the upflow pass (``pass_target``: (estimate, point), flown until reached, made or
+    the estimate moves). After that it probes the cell within ``near_m`` of the estimate and
+    ``PROBE_REACH`` cells of its own, or first free upflow beyond an obstacle, where the next
+    observation is worth most (eq. I1): downflow of the estimate when the map's rival lies
+    downflow, upflow or beside it when the rival lies there; it need not come back to the
+    estimate's cell between probes. A probe beyond an obstacle is a ``detour``, flown until
+    reached."""
 
     grid: Grid
     upflow_pass_m: float
+    near_m: float
+    """The probe works while the vehicle is this close to the estimate's centre, and chooses among
+    cells this close to it: where the rule may fire (the declaration's ``visit_radius_m``), and
+    no farther than ``PROBE_REACH`` cells."""
     detour: int | None = None
     pass_target: tuple[int, Waypoint] | None = None
     stopped_short: bool = False
@@ -149,8 +155,9 @@ class EstimateProbe:
                 if away >= PASS_PROBE_REACHED_M and not self.stopped_short:
                     return (target,)
             self.pass_target = None
-        if routing.reach.goal_for(ctx.cell, ctx.goal) != ctx.cell:
-            return None
+        goal = routing.reach.goal_for(ctx.cell, ctx.goal)
+        if goal != ctx.cell and not (goal == ctx.goal and self._near(ctx, goal)):
+            return None  # an estimate that cannot be reached: first the cell nearest it
         point = self._pass_point(ctx, frame, passed_upflow or self.stopped_short)
         if point is not None:
             self.pass_target = (ctx.goal, point)
@@ -180,17 +187,27 @@ class EstimateProbe:
             return None
         return target
 
+    def _near(self, ctx: PlanContext, goal: int) -> bool:
+        """Whether the vehicle is within ``near_m`` of ``goal``'s centre."""
+        gx, gy = self.grid.centre(goal)
+        return math.hypot(ctx.vehicle.x - gx, ctx.vehicle.y - gy) <= self.near_m
+
     def _informative(self, ctx: PlanContext, beyond: int | None) -> int | None:
         """The free cell within ``PROBE_REACH`` rows and columns of the vehicle's (its own
-        excepted), or ``beyond``, where one more observation tells the most about the source
-        (eq. I1 over the mapper's own odour kernel); None when there is no such cell."""
+        excepted) and ``near_m`` (at least a cell's diagonal) of the estimate's centre, or
+        ``beyond``, where one more
+        observation tells the most about the source (eq. I1 over the mapper's own odour kernel);
+        None when there is no such cell."""
         grid = self.grid
         row, col = grid.row_col(ctx.cell)
         offsets = np.arange(-PROBE_REACH, PROBE_REACH + 1)
         rows, cols = (a.ravel() for a in np.meshgrid(row + offsets, col + offsets, indexing="ij"))
         inside = (rows >= 0) & (rows < grid.rows) & (cols >= 0) & (cols < grid.columns)
         rows, cols = rows[inside], cols[inside]
+        gx, gy = grid.centre(ctx.goal)
         keep = ~grid.obstacle_mask[rows, cols] & ((rows != row) | (cols != col))
+        near_m = max(self.near_m, math.hypot(grid.cell_width_m, grid.cell_height_m))  # neighbours at least
+        keep &= np.hypot(grid.x_centres[cols] - gx, grid.y_centres[rows] - gy) <= near_m
         cells = np.stack([rows[keep], cols[keep]], axis=1)
         if beyond is not None:
             cells = np.vstack([cells, grid.row_col(beyond)])
@@ -235,7 +252,8 @@ class Declaring:
         self.config = config
         self._declarer = Declarer(grid, config, admit)
         self.check: Check | None = None  # the upflow check of a cell about to be declared
-        self.probe = EstimateProbe(grid, config.upflow_pass_m)
+        reach_m = PROBE_REACH * math.hypot(grid.cell_width_m, grid.cell_height_m)
+        self.probe = EstimateProbe(grid, config.upflow_pass_m, min(config.visit_radius_m, reach_m))
 
     @property
     def armed(self) -> bool:

@@ -26,10 +26,17 @@ if TYPE_CHECKING:
 
 
 def is_safe_point(grid: Grid, x: float, y: float) -> bool:
-    """Inside the search area, outside every obstacle cell and every obstacle rectangle."""
+    """Inside the search area, outside every obstacle cell and every obstacle rectangle. A point
+    on the boundary between two cells belongs to both: neither may be an obstacle cell."""
     if not (math.isfinite(x) and math.isfinite(y) and grid.contains(x, y)):
         return False
-    if grid.obstacle_mask.flat[grid.cell_of(x, y)]:
+    u = (x - grid.x_min) / grid.cell_width_m
+    v = (y - grid.y_min) / grid.cell_height_m
+    cols = {min(int(u), grid.columns - 1)} | ({int(u) - 1} if u == int(u) and u > 0 else set())
+    rows = {min(int(v), grid.rows - 1)} | ({int(v) - 1} if v == int(v) and v > 0 else set())
+    if grid.obstacle_mask.flat[grid.cell_of(x, y)] or any(
+        grid.obstacle_mask[r, c] for r in rows for c in cols
+    ):
         return False
     return not grid.in_obstacle(x, y)
 

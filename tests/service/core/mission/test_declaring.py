@@ -159,7 +159,9 @@ class SplitMapper(HmmMapper):
 
 def probe_cell(mapper: SplitMapper) -> int | None:
     ctx = PlanContext(VehicleState(SX, SY, 0.0), SOURCE, SOURCE, mapper)
-    waypoints = EstimateProbe(AREA, upflow_pass_m=0.0).waypoints(ctx, ROUTING, EAST, passed_upflow=False)
+    waypoints = EstimateProbe(AREA, upflow_pass_m=0.0, near_m=CONFIG.visit_radius_m).waypoints(
+        ctx, ROUTING, EAST, passed_upflow=False
+    )
     return None if waypoints is None else AREA.cell_of(waypoints[-1].x, waypoints[-1].y)
 
 
@@ -171,13 +173,13 @@ def test_at_the_estimate_the_probe_looks_where_the_rivals_disagree() -> None:
 
 
 def test_away_from_the_estimate_or_without_a_flow_there_is_no_probe() -> None:
-    probe = EstimateProbe(AREA, upflow_pass_m=0.0)
+    probe = EstimateProbe(AREA, upflow_pass_m=0.0, near_m=CONFIG.visit_radius_m)
     assert probe.waypoints(ctx_at(SX + 20.0, SY), ROUTING, EAST, passed_upflow=False) is None
     assert probe.waypoints(ctx_at(SX, SY), ROUTING, None, passed_upflow=False) is None
 
 
 def test_the_pass_probe_flies_just_beyond_the_upflow_pass_until_it_is_made() -> None:
-    probe = EstimateProbe(AREA, upflow_pass_m=2.0)
+    probe = EstimateProbe(AREA, upflow_pass_m=2.0, near_m=CONFIG.visit_radius_m)
     target = Waypoint(SX - 2.0 - PASS_PROBE_MARGIN_M, SY)
     assert probe.waypoints(ctx_at(SX, SY), ROUTING, EAST, passed_upflow=False) == (target,)
     assert probe.waypoints(ctx_at(SX - 1.0, SY), ROUTING, EAST, passed_upflow=False) == (target,)
@@ -187,5 +189,5 @@ def test_the_pass_probe_flies_just_beyond_the_upflow_pass_until_it_is_made() -> 
 
 
 def test_no_probe_without_a_flow() -> None:
-    probe = EstimateProbe(AREA, upflow_pass_m=2.0)
+    probe = EstimateProbe(AREA, upflow_pass_m=2.0, near_m=CONFIG.visit_radius_m)
     assert probe.waypoints(ctx_at(SX, SY), ROUTING, None, passed_upflow=False) is None

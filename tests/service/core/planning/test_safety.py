@@ -122,3 +122,13 @@ def test_reachability_agrees_with_breadth_first_search() -> None:
             assert dist[got] == pytest.approx(min(dist.values()))
         else:
             assert got == start
+
+
+def test_a_point_on_the_boundary_of_an_obstacle_cell_is_not_safe() -> None:
+    # 2 m cells; the obstacle (4.5-5.5, 4.5-5.5) blocks the cell x 4-6, y 4-6. x = 4 is the boundary
+    # between that cell and the free one to its west: a point there belongs to both
+    grid = Grid(0.0, 10.0, 0.0, 10.0, columns=5, rows=5, obstacles=((4.5, 4.5, 5.5, 5.5),))
+    assert not is_safe_point(grid, 4.0, 5.0)
+    assert not is_safe_point(grid, 5.0, 6.0)
+    assert is_safe_point(grid, 3.9, 5.0)
+    assert is_safe_point(grid, 2.0, 5.0)
