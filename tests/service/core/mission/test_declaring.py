@@ -172,6 +172,26 @@ def test_at_the_estimate_the_probe_looks_where_the_rivals_disagree() -> None:
     assert probe_cell(SplitMapper((SOURCE - 2, SOURCE))) in (SOURCE - 2, SOURCE - 1)
 
 
+def test_near_the_estimate_the_probe_goes_on_without_coming_back_to_its_cell() -> None:
+    # 1 m cells: 2 m from the estimate's centre (within the 3 m where the rule may fire) the vehicle
+    # probes from where it is; 4 m away it is the planner's turn
+    fine = Grid(0.0, 20.0, 0.0, 20.0, columns=20, rows=20)
+    estimate = fine.cell_of(10.5, 10.5)
+    mapper = HmmMapper(fine)
+    mapper._pi = np.zeros(fine.shape)
+    mapper._pi.flat[estimate] = 0.5
+    mapper._pi.flat[estimate + 3] = 0.5  # the rival 3 m downflow
+    probe = EstimateProbe(fine, upflow_pass_m=0.0, near_m=3.0)
+    routing = Routing.of(fine, PlanningConfig())
+
+    def probe_from(x: float) -> tuple[Waypoint, ...] | None:
+        ctx = PlanContext(VehicleState(x, 10.5, 0.0), fine.cell_of(x, 10.5), estimate, mapper)
+        return probe.waypoints(ctx, routing, EAST, passed_upflow=True)
+
+    assert probe_from(12.5) is not None
+    assert probe_from(14.5) is None
+
+
 def test_away_from_the_estimate_or_without_a_flow_there_is_no_probe() -> None:
     probe = EstimateProbe(AREA, upflow_pass_m=0.0, near_m=CONFIG.visit_radius_m)
     assert probe.waypoints(ctx_at(SX + 20.0, SY), ROUTING, EAST, passed_upflow=False) is None
