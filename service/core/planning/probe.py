@@ -17,7 +17,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
-from numpy.lib.stride_tricks import sliding_window_view
+
+from service.core.planning.prospect import seen_from
 
 if TYPE_CHECKING:
     from service.core.mapping.belief import FloatArray
@@ -35,11 +36,7 @@ def information(
 ) -> FloatArray:
     """Eq. I1 for an observation in each of ``cells`` ((K, 2) rows and columns), shape (K,).
     ``kernel`` is q over offsets, (2n - 1, 2m - 1), as ``SourceMapper.odour_kernel`` gives it."""
-    n, m = pi.shape
-    windows = sliding_window_view(kernel, (n, m))
-    # the source map seen from cell (r, c) is the window starting at (n - 1 - r, m - 1 - c)
-    seen = windows[n - 1 - cells[:, 0], m - 1 - cells[:, 1]]
-    likely = false_alarm + (1.0 - false_alarm) * seen
+    likely = false_alarm + (1.0 - false_alarm) * seen_from(kernel, pi.shape, cells[:, 0], cells[:, 1])
     detect = np.einsum("ij,kij->k", pi, likely)
     out: FloatArray = _entropy(detect) - np.einsum("ij,kij->k", pi, _entropy(likely))
     return out

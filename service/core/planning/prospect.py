@@ -70,18 +70,28 @@ def leg_cells(
     return np.stack(grid.rows_columns_of(x, y), axis=1)
 
 
+def seen_from(
+    offsets: npt.NDArray[Any], shape: tuple[int, int], rows: npt.NDArray[np.intp], cols: npt.NDArray[np.intp]
+) -> npt.NDArray[Any]:
+    """A field over source-minus-vehicle offsets, (2n - 1, 2m - 1), as the (n, m) map of sources
+    seen from each vehicle cell (``rows``, ``cols``): shape (K, n, m), views, no copy of the field."""
+    n, m = shape
+    windows = sliding_window_view(offsets, (n, m))
+    # the source map seen from cell (r, c) is the window starting at (n - 1 - r, m - 1 - c)
+    out: npt.NDArray[Any] = windows[n - 1 - rows, m - 1 - cols]
+    return out
+
+
 def odour_chances(
     pi: FloatArray, log_miss: npt.NDArray[np.floating[Any]], cells: npt.NDArray[np.intp]
 ) -> FloatArray:
     """pi_i (1 - prod_k (1 - q(c_k - i))): each source's share of eq. P1 for the ticks at ``cells``
     (from ``leg_cells``), given the source map ``pi`` (n, m) and log(1 - q) over offsets,
     ``log_miss`` (2n - 1, 2m - 1). Their sum is eq. P1."""
-    n, m = pi.shape
-    windows = sliding_window_view(log_miss, (n, m))
+    m = pi.shape[1]
     flat, counts = np.unique(cells[:, 0] * m + cells[:, 1], return_counts=True)
     rows, cols = np.divmod(flat, m)
-    # the source map seen from cell (r, c) is the window starting at (n - 1 - r, m - 1 - c)
-    total = np.einsum("k,kij->ij", counts.astype(log_miss.dtype), windows[n - 1 - rows, m - 1 - cols])
+    total = np.einsum("k,kij->ij", counts.astype(log_miss.dtype), seen_from(log_miss, pi.shape, rows, cols))
     shares: FloatArray = pi * -np.expm1(total)
     return shares
 
