@@ -44,7 +44,7 @@ class Prospect:
 
     def waypoints(self, ctx: PlanContext, flow: FlowFrame | None, routing: Routing) -> tuple[Waypoint, ...]:
         """The leg to fly; () while the mapper has no flow history yet (hold)."""
-        self._measure(ctx)
+        self.observe(ctx.vehicle.x, ctx.vehicle.y)
         if flow is None or not ctx.mapper.history:
             return ()
         if self.frame is None or flow.angle_to(self.frame) > REDRAW_RAD:
@@ -56,11 +56,19 @@ class Prospect:
         return wanted or ()
 
     def restart(self) -> None:
-        """Choose a new leg from where the vehicle is at the next tick."""
+        """Choose a new leg from where the vehicle is at the next tick. The vehicle moved in other
+        states meanwhile: that move is not one tick's."""
         self.frame = None
+        self._last = None
 
-    def _measure(self, ctx: PlanContext) -> None:
-        here = (ctx.vehicle.x, ctx.vehicle.y)
+    @property
+    def step_m(self) -> float:
+        """The distance the vehicle covers in a tick: the median of its last moves."""
+        return sorted(self._moves)[len(self._moves) // 2] if self._moves else DEFAULT_STEP_M
+
+    def observe(self, x: float, y: float) -> None:
+        """Count the move since the last tick in ``FIND``."""
+        here = (x, y)
         if self._last is not None:
             move = math.dist(here, self._last)
             if move >= MOVING_M:
@@ -71,7 +79,7 @@ class Prospect:
         self.frame = flow
         if self._ends is None:
             self._ends = candidate_ends(self.grid)
-        step_m = sorted(self._moves)[len(self._moves) // 2] if self._moves else DEFAULT_STEP_M
+        step_m = self.step_m
         mapper = ctx.mapper
         here = (ctx.vehicle.x, ctx.vehicle.y)
         kernel = mapper.odour_kernel()
