@@ -319,6 +319,20 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
                    help="run the missions on this Dask scheduler (pip install -e '.[cluster]')")  # fmt: skip
     w.add_argument("--json", action="store_true", help="one JSON object per class, then a summary object")
 
+    r = kinds.add_parser(
+        "model", help="the mapper's P(detection) at the true source against the detector, by position"
+    )
+    r.add_argument("--class", dest="classes", action="append", metavar="NAME",
+                   help="measure only this class (repeatable; default: every class)")  # fmt: skip
+    r.add_argument("--runs", type=_at_least(1), default=10, help="missions per class (default 10)")
+    r.add_argument("--first-seed", type=_at_least(0), default=0, help="seeds K..K+N-1 (default 0)")
+    r.add_argument(
+        "--config", default=None, metavar="FILE", help="service configuration (default config/default.toml)"
+    )
+    _add_overrides(r, "KEY=VALUE", "override a service key (e.g. mapping.sigma_x=0.3)", dest="overrides")
+    r.add_argument("--jobs", type=int, default=None, help="worker processes (default: the cores)")
+    r.add_argument("--json", action="store_true", help="one JSON object per class and band")
+
     p = kinds.add_parser("plume", help="filament plume model: steps per second at a puff count")
     p.add_argument("--puffs", type=int, default=10_000, help="live puffs at steady state (default 10000)")
     p.add_argument("--json", action="store_true", help="one JSON object")

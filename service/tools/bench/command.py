@@ -5,10 +5,15 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from service.tools.bench import mapping, search, suite
 from service.tools.progress import progress_bar
 from sim_bridge.scenarios import load_scenario
+
+if TYPE_CHECKING:
+    from service.tools.bench import reliability as reliability_types
 
 
 def run(args: argparse.Namespace) -> int:
@@ -20,6 +25,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_suite(args)
     if args.bench == "plume":
         return _run_plume(args)
+    if args.bench == "model":
+        return _run_model(args)
     raise AssertionError(args.bench)
 
 
@@ -129,14 +136,57 @@ def _run_plume(args: argparse.Namespace) -> int:
     return 0
 
 
+def _class_files(command: str, suite_dir: str | None, names: list[str] | None) -> list[Path]:
+    """The suite's class files, or the named ones (SystemExit naming an unknown class)."""
+    files = suite.suite_classes(suite_dir)
+    if not names:
+        return files
+    known = {path.stem: path for path in files}
+    unknown = [name for name in names if name not in known]
+    if unknown:
+        raise SystemExit(f"oslim bench {command}: unknown class {unknown[0]!r}; known: {', '.join(known)}")
+    return [known[name] for name in dict.fromkeys(names)]
+
+
+def _run_model(args: argparse.Namespace) -> int:
+    from service.tools.bench import reliability
+
+    files = _class_files("model", None, args.classes)
+    suite.service_config(args.config, tuple(args.overrides))  # a broken configuration stops here
+    if not args.json:
+        print(
+            f"the model's P(detection | the true source) against the detector: {len(files)} classes "
+            f"x {args.runs} missions (seeds {args.first_seed}..{args.first_seed + args.runs - 1}), "
+            f"configuration {args.config or 'config/default.toml'}"
+            f"{''.join(f' --set {o}' for o in args.overrides)}",
+            flush=True,
+        )
+    everything = []
+    for name, ticks in reliability.run(
+        files, args.runs, first_seed=args.first_seed, config_path=args.config,
+        overrides=args.overrides, jobs=args.jobs,
+    ):  # fmt: skip
+        everything.append(ticks)
+        _print_bands(name, reliability.bands(ticks), args.json)
+    if len(everything) > 1:
+        _print_bands("all", reliability.bands(reliability.Ticks.join(everything)), args.json)
+    return 0
+
+
+def _print_bands(name: str, bands: list[reliability_types.Band], as_json: bool) -> None:
+    if as_json:
+        for band in bands:
+            print(json.dumps({"class": name, **band.as_row()}), flush=True)
+        return
+    print(f"{name}: where the vehicle was (m)               ticks   model  detected", flush=True)
+    for band in bands:
+        model = "-" if band.predicted is None else f"{band.predicted:.2f}"
+        seen = "-" if band.detected is None else f"{band.detected:.2f}"
+        print(f"  {band.label:<44}{band.ticks:>6}{model:>8}{seen:>10}", flush=True)
+
+
 def _run_suite(args: argparse.Namespace) -> int:
-    files = suite.suite_classes(args.suite)
-    if args.classes:
-        known = {path.stem: path for path in files}
-        unknown = [name for name in args.classes if name not in known]
-        if unknown:
-            raise SystemExit(f"oslim bench suite: unknown class {unknown[0]!r}; known: {', '.join(known)}")
-        files = [known[name] for name in dict.fromkeys(args.classes)]
+    files = _class_files("suite", args.suite, args.classes)
     suite.service_config(args.config, tuple(args.overrides))  # a broken configuration stops here
     if not args.json:
         print(

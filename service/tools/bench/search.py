@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from service.api import Declaration, Search
+from service.api import Declaration, Search, Step
 from service.core.config import MappingMethod, PlanningMethod
 from service.core.errors import ConfigError
 from service.core.grid import Grid
@@ -180,8 +180,10 @@ def run_mission(
     max_time_s: float = DEFAULT_MAX_TIME_S,
     record: bool = False,
     oracle: bool = False,
+    on_tick: Callable[[Search, Step], None] | None = None,
 ) -> MissionResult:
-    """One closed-loop mission of ``scenario`` drawn from ``seed``; ``record`` keeps a trace.
+    """One closed-loop mission of ``scenario`` drawn from ``seed``; ``record`` keeps a trace;
+    ``on_tick`` is shown the service and each tick's step (what a diagnostic measures).
 
     With ``oracle`` the declaration has a perfect guard: a rule that fires for a cell more than one
     cell from the true source is ignored. No vehicle has one; it bounds what any guard against
@@ -223,6 +225,8 @@ def run_mission(
             continue
         if step.waypoints is not None:
             world.target_m = step.waypoints[0] if step.waypoints else None
+        if on_tick is not None:
+            on_tick(search, step)
         if step.detected and first_detection is None:
             first_detection = step.time_s
         if reached is None and grid.contains(v.x_m, v.y_m) and within_one_cell(grid, v.x_m, v.y_m, *source):

@@ -1,0 +1,148 @@
+"""How well the mapper's observation model foretells the detector, in the suite's worlds.
+
+Each tick the mapper weighs the tick's event by its own P(detection | source in cell i) under its
+flow history. Taken at the true source's cell, that is the chance the model gave the detection the
+vehicle then had or missed. Grouped by where the vehicle was relative to the true source (along
+and across the world's mean flow), the model's mean chance and the share of ticks with a detection
+should agree. Where the model says more than the detector gives, every miss there counts too much
+against the true source; where it says less, every hit counts too little. The success rate of the
+suite is a noisy measure of a model; this table shows the model's error where it is made.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterator, Sequence
+from concurrent.futures import Future
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from service.api import Search, Step
+from service.tools.bench.search import run_mission
+from service.tools.bench.suite import SuiteMission, service_config
+from service.tools.bench.workers import worker_pool
+from sim_bridge.generator import draw_scenario, load_class
+from sim_bridge.scenarios import place
+
+ON_LINE_M = 2.0
+"""A tick counts as on the source's flow line when the vehicle is at most this far across it."""
+BESIDE_M = 5.0
+"""... and as beside the plume when it is farther, but at most this far across."""
+BANDS: tuple[tuple[str, float, float, float, float], ...] = (
+    # label, along from, along to (m downflow of the source), across from, across to
+    ("on the line, 10-3 m upflow", -10.0, -3.0, 0.0, ON_LINE_M),
+    ("on the line, 3-1 m upflow", -3.0, -1.0, 0.0, ON_LINE_M),
+    ("on the line, within 1 m of the source", -1.0, 1.0, 0.0, ON_LINE_M),
+    ("on the line, 1-3 m downflow", 1.0, 3.0, 0.0, ON_LINE_M),
+    ("on the line, 3-10 m downflow", 3.0, 10.0, 0.0, ON_LINE_M),
+    ("on the line, 10-30 m downflow", 10.0, 30.0, 0.0, ON_LINE_M),
+    ("on the line, over 30 m downflow", 30.0, math.inf, 0.0, ON_LINE_M),
+    ("2-5 m across, 1 m upflow to 30 m downflow", -1.0, 30.0, ON_LINE_M, BESIDE_M),
+)
+
+
+@dataclass(frozen=True)
+class Ticks:
+    """Every tick of some missions in the area: where the vehicle was relative to the source
+    (m, along and across the mean flow), the model's P(d | true source cell) and the event."""
+
+    along_m: npt.NDArray[np.float64]
+    across_m: npt.NDArray[np.float64]
+    predicted: npt.NDArray[np.float64]
+    detected: npt.NDArray[np.bool_]
+
+    @classmethod
+    def join(cls, parts: Sequence[Ticks]) -> Ticks:
+        return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in cls.__dataclass_fields__))
+
+
+@dataclass(frozen=True)
+class Band:
+    """One band of positions: its ticks, the model's mean P(d) there and the share detected."""
+
+    label: str
+    ticks: int
+    predicted: float | None
+    detected: float | None
+
+    def as_row(self) -> dict[str, Any]:
+        return {"band": self.label, "ticks": self.ticks, "model": self.predicted, "detected": self.detected}
+
+
+def mission_ticks(spec: SuiteMission) -> Ticks:
+    """The ticks of one suite mission (a worker's task)."""
+    config = service_config(spec.config_path, spec.overrides)
+    drawn = draw_scenario(load_class(spec.class_path), spec.seed, config)
+    placement = place(drawn.scenario, spec.seed)
+    sx, sy = placement.source_m
+    fx, fy = placement.mean_flow_mps
+    speed = math.hypot(fx, fy)
+    ux, uy = (fx / speed, fy / speed) if speed > 0 else (1.0, 0.0)
+    rows: list[tuple[float, float, float, bool]] = []
+
+    def record(search: Search, step: Step) -> None:
+        grid, obs = search.model_grid, step.observation
+        if not (grid.contains(obs.x, obs.y) and grid.contains(sx, sy)):
+            return  # the mapper fuses no event from outside the area
+        chance = search.mapper.detection_likelihood(grid.cell_of(obs.x, obs.y))
+        row, col = grid.row_col(grid.cell_of(sx, sy))
+        dx, dy = obs.x - sx, obs.y - sy
+        rows.append((dx * ux + dy * uy, abs(dx * uy - dy * ux), float(chance[row, col]), obs.detected))
+
+    run_mission(drawn.scenario, spec.seed, max_time_s=drawn.time_limit_s, on_tick=record)
+    along, across, predicted, detected = (np.array(c) for c in zip(*rows, strict=True)) if rows else ([],) * 4
+    return Ticks(
+        np.asarray(along, dtype=float),
+        np.asarray(across, dtype=float),
+        np.asarray(predicted, dtype=float),
+        np.asarray(detected, dtype=bool),
+    )
+
+
+def bands(ticks: Ticks) -> list[Band]:
+    """The model's mean P(d) and the detected share in each of ``BANDS``."""
+    out = []
+    for label, a0, a1, c0, c1 in BANDS:
+        inside = (ticks.along_m >= a0) & (ticks.along_m < a1) & (ticks.across_m >= c0) & (ticks.across_m < c1)
+        n = int(inside.sum())
+        out.append(
+            Band(
+                label,
+                n,
+                float(ticks.predicted[inside].mean()) if n else None,
+                float(ticks.detected[inside].mean()) if n else None,
+            )
+        )
+    return out
+
+
+def run(
+    class_files: Sequence[Path],
+    runs: int,
+    *,
+    first_seed: int = 0,
+    config_path: str | None = None,
+    overrides: Sequence[str] = (),
+    jobs: int | None = None,
+) -> Iterator[tuple[str, Ticks]]:
+    """Each class's ticks over seeds first_seed..first_seed+runs-1, in order."""
+    if runs < 1:
+        raise ValueError("runs must be >= 1")
+    service_config(config_path, tuple(overrides))  # a broken configuration fails here, once
+    classes = [load_class(str(path)) for path in class_files]
+    seeds = range(first_seed, first_seed + runs)
+    specs = [[SuiteMission(c.origin, seed, config_path, tuple(overrides)) for seed in seeds] for c in classes]
+    workers = jobs or os.cpu_count() or 1
+    if workers == 1:
+        for c, batch in zip(classes, specs, strict=True):
+            yield c.name, Ticks.join([mission_ticks(spec) for spec in batch])
+        return
+    with worker_pool(workers) as pool:
+        futures: list[list[Future[Ticks]]] = [[pool.submit(mission_ticks, s) for s in b] for b in specs]
+        for c, batch_futures in zip(classes, futures, strict=True):
+            yield c.name, Ticks.join([f.result() for f in batch_futures])
