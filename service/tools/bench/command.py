@@ -148,24 +148,27 @@ def _class_files(command: str, suite_dir: str | None, names: list[str] | None) -
     return [known[name] for name in dict.fromkeys(names)]
 
 
+def _missions(args: argparse.Namespace, files: list[Path]) -> str:
+    """What a suite-wide run measures: classes, missions, seeds and configuration, in words."""
+    return (
+        f"{len(files)} classes x {args.runs} missions (seeds {args.first_seed}.."
+        f"{args.first_seed + args.runs - 1}), configuration {args.config or 'config/default.toml'}"
+        f"{''.join(f' --set {o}' for o in args.overrides)}"
+    )
+
+
 def _run_model(args: argparse.Namespace) -> int:
     from service.tools.bench import reliability
 
     files = _class_files("model", None, args.classes)
-    suite.service_config(args.config, tuple(args.overrides))  # a broken configuration stops here
+    batches = suite.class_missions(files, args.runs, args.first_seed, args.config, args.overrides)
     if not args.json:
         print(
-            f"the model's P(detection | the true source) against the detector: {len(files)} classes "
-            f"x {args.runs} missions (seeds {args.first_seed}..{args.first_seed + args.runs - 1}), "
-            f"configuration {args.config or 'config/default.toml'}"
-            f"{''.join(f' --set {o}' for o in args.overrides)}",
+            f"the model's P(detection | the true source) against the detector: {_missions(args, files)}",
             flush=True,
         )
     everything = []
-    for name, ticks in reliability.run(
-        files, args.runs, first_seed=args.first_seed, config_path=args.config,
-        overrides=args.overrides, jobs=args.jobs,
-    ):  # fmt: skip
+    for name, ticks in reliability.run(batches, args.jobs):
         everything.append(ticks)
         _print_bands(name, reliability.bands(ticks), args.json)
     if len(everything) > 1:
@@ -190,9 +193,7 @@ def _run_suite(args: argparse.Namespace) -> int:
     suite.service_config(args.config, tuple(args.overrides))  # a broken configuration stops here
     if not args.json:
         print(
-            f"suite {args.suite or 'config/suites'}: {len(files)} classes x {args.runs} missions (seeds "
-            f"{args.first_seed}..{args.first_seed + args.runs - 1}), configuration "
-            f"{args.config or 'config/default.toml'}{''.join(f' --set {o}' for o in args.overrides)}; "
+            f"suite {args.suite or 'config/suites'}: {_missions(args, files)}; "
             "times: median / p90 to a correct declaration",
             flush=True,
         )

@@ -16,7 +16,6 @@ import os
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Future
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -122,27 +121,15 @@ def bands(ticks: Ticks) -> list[Band]:
 
 
 def run(
-    class_files: Sequence[Path],
-    runs: int,
-    *,
-    first_seed: int = 0,
-    config_path: str | None = None,
-    overrides: Sequence[str] = (),
-    jobs: int | None = None,
+    batches: Sequence[tuple[str, list[SuiteMission]]], jobs: int | None = None
 ) -> Iterator[tuple[str, Ticks]]:
-    """Each class's ticks over seeds first_seed..first_seed+runs-1, in order."""
-    if runs < 1:
-        raise ValueError("runs must be >= 1")
-    service_config(config_path, tuple(overrides))  # a broken configuration fails here, once
-    classes = [load_class(str(path)) for path in class_files]
-    seeds = range(first_seed, first_seed + runs)
-    specs = [[SuiteMission(c.origin, seed, config_path, tuple(overrides)) for seed in seeds] for c in classes]
+    """Each class's ticks over its missions (``suite.class_missions``), in order."""
     workers = jobs or os.cpu_count() or 1
     if workers == 1:
-        for c, batch in zip(classes, specs, strict=True):
-            yield c.name, Ticks.join([mission_ticks(spec) for spec in batch])
+        for name, batch in batches:
+            yield name, Ticks.join([mission_ticks(spec) for spec in batch])
         return
     with worker_pool(workers) as pool:
-        futures: list[list[Future[Ticks]]] = [[pool.submit(mission_ticks, s) for s in b] for b in specs]
-        for c, batch_futures in zip(classes, futures, strict=True):
-            yield c.name, Ticks.join([f.result() for f in batch_futures])
+        futures: list[list[Future[Ticks]]] = [[pool.submit(mission_ticks, s) for s in b] for _, b in batches]
+        for (name, _), batch_futures in zip(batches, futures, strict=True):
+            yield name, Ticks.join([f.result() for f in batch_futures])

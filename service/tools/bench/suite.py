@@ -291,23 +291,30 @@ def run_suite(
 
     ``scheduler``: a Dask scheduler address (or a ``distributed.Client``) to run the missions on;
     None runs them in ``jobs`` local processes (default: the cores)."""
-    if runs < 1:
-        raise ValueError("runs must be >= 1")
-    service_config(config_path, tuple(overrides))  # a broken configuration fails here, once
-    classes = [_world_class(str(path)) for path in class_files]
-    specs = [
-        SuiteMission(c.origin, seed, config_path, tuple(overrides))
-        for c in classes
-        for seed in range(first_seed, first_seed + runs)
-    ]
-    for c in classes:  # every class can draw its first world with this configuration
-        draw_scenario(c, first_seed, service_config(config_path, tuple(overrides)))
+    batches = class_missions(class_files, runs, first_seed, config_path, overrides)
+    specs = [spec for _, batch in batches for spec in batch]
     if scheduler is not None:
         outcomes = _dask(specs, scheduler, progress)
     else:
         outcomes = _local(specs, jobs or os.cpu_count() or 1, progress)
+    for name, _ in batches:
+        yield summarise_class(name, [next(outcomes) for _ in range(runs)])
+
+
+def class_missions(
+    class_files: Sequence[Path], runs: int, first_seed: int, config_path: str | None, overrides: Sequence[str]
+) -> list[tuple[str, list[SuiteMission]]]:
+    """Each class's name and its missions over seeds first_seed..first_seed+runs-1. A broken
+    configuration, or a class that cannot draw its first world with it, fails here, once."""
+    if runs < 1:
+        raise ValueError("runs must be >= 1")
+    config = service_config(config_path, tuple(overrides))
+    classes = [_world_class(str(path)) for path in class_files]
     for c in classes:
-        yield summarise_class(c.name, [next(outcomes) for _ in range(runs)])
+        draw_scenario(c, first_seed, config)
+    seeds = range(first_seed, first_seed + runs)
+    keys = tuple(overrides)
+    return [(c.name, [SuiteMission(c.origin, seed, config_path, keys) for seed in seeds]) for c in classes]
 
 
 def suite_classes(directory: str | Path | None = None) -> list[Path]:
