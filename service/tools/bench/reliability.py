@@ -23,9 +23,8 @@ import numpy.typing as npt
 
 from service.api import Search, Step
 from service.tools.bench.search import run_mission
-from service.tools.bench.suite import SuiteMission, service_config
+from service.tools.bench.suite import SuiteMission, drawn_world
 from service.tools.bench.workers import worker_pool
-from sim_bridge.generator import draw_scenario, load_class
 from sim_bridge.scenarios import place
 
 ON_LINE_M = 2.0
@@ -75,8 +74,7 @@ class Band:
 
 def mission_ticks(spec: SuiteMission) -> Ticks:
     """The ticks of one suite mission (a worker's task)."""
-    config = service_config(spec.config_path, spec.overrides)
-    drawn = draw_scenario(load_class(spec.class_path), spec.seed, config)
+    drawn = drawn_world(spec)
     placement = place(drawn.scenario, spec.seed)
     sx, sy = placement.source_m
     fx, fy = placement.mean_flow_mps
@@ -86,7 +84,7 @@ def mission_ticks(spec: SuiteMission) -> Ticks:
 
     def record(search: Search, step: Step) -> None:
         grid, obs = search.model_grid, step.observation
-        if not (grid.contains(obs.x, obs.y) and grid.contains(sx, sy)):
+        if not grid.contains(obs.x, obs.y):
             return  # the mapper fuses no event from outside the area
         chance = search.mapper.detection_likelihood(grid.cell_of(obs.x, obs.y))
         row, col = grid.row_col(grid.cell_of(sx, sy))
@@ -94,13 +92,8 @@ def mission_ticks(spec: SuiteMission) -> Ticks:
         rows.append((dx * ux + dy * uy, abs(dx * uy - dy * ux), float(chance[row, col]), obs.detected))
 
     run_mission(drawn.scenario, spec.seed, max_time_s=drawn.time_limit_s, on_tick=record)
-    along, across, predicted, detected = (np.array(c) for c in zip(*rows, strict=True)) if rows else ([],) * 4
-    return Ticks(
-        np.asarray(along, dtype=float),
-        np.asarray(across, dtype=float),
-        np.asarray(predicted, dtype=float),
-        np.asarray(detected, dtype=bool),
-    )
+    table = np.array(rows, dtype=float).reshape(-1, 4)
+    return Ticks(table[:, 0], table[:, 1], table[:, 2], table[:, 3] > 0.5)
 
 
 def bands(ticks: Ticks) -> list[Band]:

@@ -27,7 +27,14 @@ import numpy as np
 from service.core.config import Config, load_config
 from service.tools.bench.search import FailureClass, MissionResult, run_mission
 from service.tools.bench.workers import worker_pool
-from sim_bridge.generator import SUITE_DIR, WorldClass, available_classes, draw_scenario, load_class
+from sim_bridge.generator import (
+    SUITE_DIR,
+    DrawnWorld,
+    WorldClass,
+    available_classes,
+    draw_scenario,
+    load_class,
+)
 
 SUMMARY_KEYS = ("classes", "missions", "worst_class", "worst_success_rate", "wrong_rate", "missions_per_s")
 
@@ -64,10 +71,15 @@ def service_config(path: str | None, overrides: tuple[str, ...]) -> Config:
     return load_config(path, overrides)
 
 
+def drawn_world(spec: SuiteMission) -> DrawnWorld:
+    """One suite mission's world and time limit (its class and configuration read once per process)."""
+    config = service_config(spec.config_path, spec.overrides)
+    return draw_scenario(_world_class(spec.class_path), spec.seed, config)
+
+
 def run_suite_mission(spec: SuiteMission) -> tuple[MissionResult, float]:
     """The mission and its time limit (a worker's task)."""
-    config = service_config(spec.config_path, spec.overrides)
-    drawn = draw_scenario(_world_class(spec.class_path), spec.seed, config)
+    drawn = drawn_world(spec)
     return run_mission(drawn.scenario, spec.seed, max_time_s=drawn.time_limit_s), drawn.time_limit_s
 
 
