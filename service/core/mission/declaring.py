@@ -26,6 +26,7 @@ from service.core.mission.events import CrossCheck, SourceDeclared
 from service.core.mission.pattern import ARRIVAL_M, Pattern
 from service.core.planning.base import Waypoint
 from service.core.planning.cast import cast_vertices
+from service.core.planning.crossflow import upflow_until
 from service.core.planning.declaration import Declarer, mass_within
 from service.core.planning.probe import information
 from service.core.planning.safety import segment_clear
@@ -73,14 +74,8 @@ class Check:
         when that point lies in an obstacle, just upflow of the obstacle: a plume that crosses the
         obstacle cannot be met beside it, only beyond it."""
         upflow = config.check_upflow_m
-        ax, ay = found.x - upflow * frame.ux, found.y - upflow * frame.uy
-        step_m = 0.5 * min(grid.cell_width_m, grid.cell_height_m)
-        beyond = upflow
-        while grid.in_obstacle(found.x - beyond * frame.ux, found.y - beyond * frame.uy):
-            beyond += step_m
-        bx, by = found.x - beyond * frame.ux, found.y - beyond * frame.uy
-        if beyond > upflow and grid.contains(bx, by):
-            ax, ay = bx, by
+        clear = upflow_until(grid, found.x, found.y, frame, upflow, lambda x, y: not grid.in_obstacle(x, y))
+        ax, ay = clear if clear is not None else (found.x - upflow * frame.ux, found.y - upflow * frame.uy)
         legs = cast_vertices(grid, ax, ay, frame, config.check_width_m, 2)
         return cls(found, frame, 0.5 * upflow, Pattern(legs))
 
@@ -227,17 +222,13 @@ class EstimateProbe:
             return None
         grid = self.grid
         reachable = reach.reachable(cell)
-        cx, cy = grid.centre(cell)
-        step_m = 0.5 * min(grid.cell_width_m, grid.cell_height_m)
-        distance_m = step_m
-        while True:
-            x, y = cx - distance_m * frame.ux, cy - distance_m * frame.uy
-            if not grid.contains(x, y):
-                return None
+
+        def beyond(x: float, y: float) -> bool:
             candidate = grid.cell_of(x, y)
-            if candidate != cell and reachable.flat[candidate]:
-                return candidate
-            distance_m += step_m
+            return candidate != cell and bool(reachable.flat[candidate])
+
+        point = upflow_until(grid, *grid.centre(cell), frame, 0.0, beyond)
+        return None if point is None else grid.cell_of(*point)
 
 
 class Declaring:

@@ -8,6 +8,7 @@ centres, so every vertex lies strictly inside the search area.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -52,6 +53,22 @@ class FlowFrame:
         """Unsigned angle between two flow directions, radians."""
         dot = max(-1.0, min(1.0, self.ux * other.ux + self.uy * other.uy))
         return math.acos(dot)
+
+
+def upflow_until(
+    grid: Grid, x: float, y: float, frame: FlowFrame, from_m: float, done: Callable[[float, float], bool]
+) -> tuple[float, float] | None:
+    """The first point on the line upflow of (x, y), from ``from_m`` upflow on in steps of half the
+    shorter cell side, where ``done`` holds; None once the line has left the area."""
+    step_m = 0.5 * min(grid.cell_width_m, grid.cell_height_m)
+    distance_m = from_m
+    while True:
+        px, py = x - distance_m * frame.ux, y - distance_m * frame.uy
+        if not grid.contains(px, py):
+            return None
+        if done(px, py):
+            return px, py
+        distance_m += step_m
 
 
 def centre_hull(grid: Grid) -> tuple[float, float, float, float]:

@@ -1,0 +1,21 @@
+from service.core.grid import Grid
+from service.core.planning.crossflow import FlowFrame, upflow_until
+
+GRID = Grid(0.0, 20.0, 0.0, 10.0, columns=10, rows=5)  # 2 x 2 m cells: half-cell steps of 1 m
+EAST = FlowFrame(1.0, 0.0)  # upflow is toward -x
+
+
+def test_the_walk_returns_the_first_point_upflow_where_done_holds() -> None:
+    seen: list[float] = []
+
+    def done(x: float, y: float) -> bool:
+        seen.append(x)
+        return x <= 12.5
+
+    assert upflow_until(GRID, 17.0, 5.0, EAST, 3.0, done) == (12.0, 5.0)
+    assert seen == [14.0, 13.0, 12.0]
+
+
+def test_the_walk_gives_up_where_the_line_leaves_the_area() -> None:
+    assert upflow_until(GRID, 3.0, 5.0, EAST, 0.0, lambda x, y: False) is None
+    assert upflow_until(GRID, 3.0, 5.0, EAST, 5.0, lambda x, y: True) is None
