@@ -190,9 +190,8 @@ class EstimateProbe:
     def _informative(self, ctx: PlanContext, beyond: int | None) -> int | None:
         """The free cell within ``PROBE_REACH`` rows and columns of the vehicle's (its own
         excepted) and ``near_m`` (at least a cell's diagonal) of the estimate's centre, or
-        ``beyond``, where one more
-        observation tells the most about the source (eq. I1 over the mapper's own odour kernel);
-        None when there is no such cell."""
+        ``beyond``, where one more observation tells the most about the source (eq. I1 over the
+        mapper's own odour kernel); None when there is no such cell."""
         grid = self.grid
         row, col = grid.row_col(ctx.cell)
         offsets = np.arange(-PROBE_REACH, PROBE_REACH + 1)
