@@ -318,6 +318,12 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
     w.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run the missions on this Dask scheduler (pip install -e '.[cluster]')")  # fmt: skip
     w.add_argument("--json", action="store_true", help="one JSON object per class, then a summary object")
+    w.add_argument(
+        "--oracle-declaration",
+        action="store_true",
+        help="a bound, not a result: declarations away from the true source are ignored (a perfect guard); "
+        "with --set declaration.* it measures what each guard against wrong declarations costs per class",
+    )
 
     r = kinds.add_parser(
         "model", help="the mapper's P(detection) at the true source against the detector, by position"

@@ -52,6 +52,9 @@ def _run_mapping(args: argparse.Namespace) -> int:
     return 0
 
 
+ORACLE = "; ORACLE declaration (a perfect guard: a bound, not a result)"
+
+
 def _fmt(value: float | None, spec: str) -> str:
     return "never" if value is None else format(value, spec)
 
@@ -63,11 +66,10 @@ def _run_search(args: argparse.Namespace) -> int:
     mappers = search.expand(args.mappers, search.mapper_names(), str(scenario.config.mapping.method))
     planners = search.expand(args.planners, search.planner_names(), str(scenario.config.planning.method))
     if not args.json:
-        oracle = "; ORACLE declaration (a perfect guard: a bound, not a result)"
         print(
             f"{scenario.name}: {args.runs} runs per configuration (seeds {args.first_seed}.."
             f"{args.first_seed + args.runs - 1}), limit {args.max_time:g} s; "
-            "times: failed runs count as never" + (oracle if args.oracle_declaration else ""),
+            "times: failed runs count as never" + (ORACLE if args.oracle_declaration else ""),
             flush=True,
         )
         print(
@@ -194,7 +196,7 @@ def _run_suite(args: argparse.Namespace) -> int:
     if not args.json:
         print(
             f"suite {args.suite or 'config/suites'}: {_missions(args, files)}; "
-            "times: median / p90 to a correct declaration",
+            "times: median / p90 to a correct declaration" + (ORACLE if args.oracle_declaration else ""),
             flush=True,
         )
         print(suite.HEADER, flush=True)
@@ -203,10 +205,14 @@ def _run_suite(args: argparse.Namespace) -> int:
             suite.run_suite(
                 files, args.runs, first_seed=args.first_seed, config_path=args.config,
                 overrides=args.overrides, jobs=args.jobs, scheduler=args.scheduler, progress=progress,
+                oracle=args.oracle_declaration,
             )
         ):  # fmt: skip
             if args.json:
-                print(json.dumps(row.as_row()), flush=True)
+                out = row.as_row()
+                if args.oracle_declaration:
+                    out["oracle_declaration"] = True
+                print(json.dumps(out), flush=True)
             else:
                 print(row.line(), flush=True)
     return 0

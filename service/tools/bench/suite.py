@@ -58,6 +58,8 @@ class SuiteMission:
     seed: int
     config_path: str | None = None
     overrides: tuple[str, ...] = ()
+    oracle: bool = False
+    """The perfect declaration guard of ``run_mission``: a bound, not a result."""
 
 
 @lru_cache(maxsize=64)
@@ -80,7 +82,8 @@ def drawn_world(spec: SuiteMission) -> DrawnWorld:
 def run_suite_mission(spec: SuiteMission) -> tuple[MissionResult, float]:
     """The mission and its time limit (a worker's task)."""
     drawn = drawn_world(spec)
-    return run_mission(drawn.scenario, spec.seed, max_time_s=drawn.time_limit_s), drawn.time_limit_s
+    limit = drawn.time_limit_s
+    return run_mission(drawn.scenario, spec.seed, max_time_s=limit, oracle=spec.oracle), limit
 
 
 @dataclass(frozen=True)
@@ -298,12 +301,14 @@ def run_suite(
     jobs: int | None = None,
     scheduler: Any = None,
     progress: Progress = lambda _: None,
+    oracle: bool = False,
 ) -> Iterator[ClassSummary]:
     """Every class over seeds first_seed..first_seed+runs-1; yields each class's summary in order.
 
     ``scheduler``: a Dask scheduler address (or a ``distributed.Client``) to run the missions on;
-    None runs them in ``jobs`` local processes (default: the cores)."""
-    batches = class_missions(class_files, runs, first_seed, config_path, overrides)
+    None runs them in ``jobs`` local processes (default: the cores). ``oracle``: every mission with
+    the perfect declaration guard (``run_mission``), a bound on what the guards cost."""
+    batches = class_missions(class_files, runs, first_seed, config_path, overrides, oracle)
     specs = [spec for _, batch in batches for spec in batch]
     if scheduler is not None:
         outcomes = _dask(specs, scheduler, progress)
@@ -314,7 +319,12 @@ def run_suite(
 
 
 def class_missions(
-    class_files: Sequence[Path], runs: int, first_seed: int, config_path: str | None, overrides: Sequence[str]
+    class_files: Sequence[Path],
+    runs: int,
+    first_seed: int,
+    config_path: str | None,
+    overrides: Sequence[str],
+    oracle: bool = False,
 ) -> list[tuple[str, list[SuiteMission]]]:
     """Each class's name and its missions over seeds first_seed..first_seed+runs-1. A broken
     configuration, or a class that cannot draw its first world with it, fails here, once."""
@@ -326,7 +336,9 @@ def class_missions(
         draw_scenario(c, first_seed, config)
     seeds = range(first_seed, first_seed + runs)
     keys = tuple(overrides)
-    return [(c.name, [SuiteMission(c.origin, seed, config_path, keys) for seed in seeds]) for c in classes]
+    return [
+        (c.name, [SuiteMission(c.origin, seed, config_path, keys, oracle) for seed in seeds]) for c in classes
+    ]
 
 
 def suite_classes(directory: str | Path | None = None) -> list[Path]:

@@ -81,6 +81,23 @@ def test_an_unknown_class_or_key_is_refused(capsys: pytest.CaptureFixture[str]) 
     assert "mapping.bogus: unknown key" in capsys.readouterr().err
 
 
+def test_the_oracle_ignores_what_the_guards_let_through(capsys: pytest.CaptureFixture[str]) -> None:
+    """With every guard off, steady seed 1 names a wrong place after 27 s; with the perfect guard
+    that declaration is ignored, and the rows say they are a bound."""
+    unguarded = ["--set", "declaration.persist_s=0", "--set", "declaration.check_width_m=0",
+                 "--set", "declaration.upflow_pass_m=0", "--set", "declaration.probability=0.5"]  # fmt: skip
+    command = ["bench", "suite", "--class", "steady", "--runs", "1", "--first-seed", "1",
+               "--jobs", "1", "--json"]  # fmt: skip
+    assert main([*command, *unguarded]) == 0
+    plain = _rows(capsys)[0]
+    assert plain["wrong_declarations"] == 1
+    assert "oracle_declaration" not in plain
+    assert main([*command, *unguarded, "--oracle-declaration"]) == 0
+    bound = _rows(capsys)[0]
+    assert bound["wrong_declarations"] == 0
+    assert bound["oracle_declaration"] is True
+
+
 def test_summaries_count_failures_per_class() -> None:
     def result(seed: int, correct: bool, declared: bool, detected: bool) -> MissionResult:
         return MissionResult(seed, 0.0, 0.0, declared, correct, 50.0 + seed, None, None, None, 10.0,
