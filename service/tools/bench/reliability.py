@@ -12,9 +12,7 @@ suite is a noisy measure of a model; this table shows the model's error where it
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Iterator, Sequence
-from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,7 +22,7 @@ import numpy.typing as npt
 from service.api import Search, Step
 from service.tools.bench.search import run_mission
 from service.tools.bench.suite import SuiteMission, drawn_world
-from service.tools.bench.workers import worker_pool
+from service.tools.bench.workers import in_order
 from sim_bridge.scenarios import place
 
 ON_LINE_M = 2.0
@@ -117,12 +115,6 @@ def run(
     batches: Sequence[tuple[str, list[SuiteMission]]], jobs: int | None = None
 ) -> Iterator[tuple[str, Ticks]]:
     """Each class's ticks over its missions (``suite.class_missions``), in order."""
-    workers = jobs or os.cpu_count() or 1
-    if workers == 1:
-        for name, batch in batches:
-            yield name, Ticks.join([mission_ticks(spec) for spec in batch])
-        return
-    with worker_pool(workers) as pool:
-        futures: list[list[Future[Ticks]]] = [[pool.submit(mission_ticks, s) for s in b] for _, b in batches]
-        for (name, _), batch_futures in zip(batches, futures, strict=True):
-            yield name, Ticks.join([f.result() for f in batch_futures])
+    ticks = in_order(mission_ticks, [spec for _, batch in batches for spec in batch], jobs)
+    for name, batch in batches:
+        yield name, Ticks.join([next(ticks) for _ in batch])

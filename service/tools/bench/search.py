@@ -25,7 +25,6 @@ the end, i.e. the declaration rule was still waiting); or a wrong declaration.
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -39,7 +38,7 @@ from service.core.errors import ConfigError
 from service.core.grid import Grid
 from service.core.mapping.belief import FloatArray
 from service.core.mission import MissionState
-from service.tools.bench.workers import worker_pool
+from service.tools.bench.workers import in_order
 from sim_bridge.scenarios import Scenario, build_world, load_scenario, place
 
 DEFAULT_MAX_TIME_S = 300.0
@@ -422,27 +421,13 @@ def run_configurations(
     if first_seed < 0:
         raise ValueError("first_seed must be >= 0")
     configure(scenario, mappers[0], planners[0], overrides)  # fail early on a bad name or key
-    workers = jobs or os.cpu_count() or 1
     configs = [(m, p) for m in mappers for p in planners]
     specs = [
         MissionSpec(scenario, m, p, seed, max_time_s, tuple(overrides), oracle)
         for m, p in configs
         for seed in range(first_seed, first_seed + runs)
     ]
-
-    def counted(results: Iterable[MissionResult]) -> Iterable[MissionResult]:
-        for result in results:
-            progress(1)
-            yield result
-
-    if workers == 1:
-        results = iter(counted(map(run_spec, specs)))
-        for m, p in configs:
-            batch = [next(results) for _ in range(runs)]
-            yield summarise(scenario, m, p, batch, max_time_s), batch
-        return
-    with worker_pool(workers) as pool:
-        mapped = iter(counted(pool.map(run_spec, specs, chunksize=1)))
-        for m, p in configs:
-            batch = [next(mapped) for _ in range(runs)]
-            yield summarise(scenario, m, p, batch, max_time_s), batch
+    results = in_order(run_spec, specs, jobs, progress)
+    for m, p in configs:
+        batch = [next(results) for _ in range(runs)]
+        yield summarise(scenario, m, p, batch, max_time_s), batch

@@ -13,10 +13,8 @@ give the same results for the same seeds, because a mission depends only on its 
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Future
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -26,7 +24,7 @@ import numpy as np
 
 from service.core.config import Config, load_config
 from service.tools.bench.search import FailureClass, MissionResult, run_mission
-from service.tools.bench.workers import worker_pool
+from service.tools.bench.workers import in_order
 from sim_bridge.generator import (
     SUITE_DIR,
     DrawnWorld,
@@ -256,23 +254,6 @@ Progress = Callable[[int], None]
 """Told how many more missions are done."""
 
 
-def _local(specs: list[SuiteMission], jobs: int, progress: Progress) -> Iterator[tuple[MissionResult, float]]:
-    if jobs == 1:
-        for spec in specs:
-            outcome = run_suite_mission(spec)
-            progress(1)
-            yield outcome
-        return
-    with worker_pool(jobs) as pool:
-        futures: list[Future[tuple[MissionResult, float]]] = []
-        for spec in specs:
-            future = pool.submit(run_suite_mission, spec)
-            future.add_done_callback(lambda _: progress(1))
-            futures.append(future)
-        for future in futures:
-            yield future.result()
-
-
 def _dask(
     specs: list[SuiteMission], scheduler: Any, progress: Progress
 ) -> Iterator[tuple[MissionResult, float]]:
@@ -313,7 +294,7 @@ def run_suite(
     if scheduler is not None:
         outcomes = _dask(specs, scheduler, progress)
     else:
-        outcomes = _local(specs, jobs or os.cpu_count() or 1, progress)
+        outcomes = in_order(run_suite_mission, specs, jobs, progress)
     for name, _ in batches:
         yield summarise_class(name, [next(outcomes) for _ in range(runs)])
 

@@ -10,10 +10,15 @@ thread each. Limiting the threads changes no result, only the time.
 from __future__ import annotations
 
 import os
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
+from typing import TypeVar
 
 import numpy  # noqa: F401  (loads the BLAS that the workers limit: an unloaded one cannot be)
 from threadpoolctl import threadpool_limits
+
+T = TypeVar("T")
+R = TypeVar("R")
 
 _limits: list[object] = []
 """Keeps the worker's limit alive for the worker's lifetime."""
@@ -27,3 +32,29 @@ def worker_pool(jobs: int) -> ProcessPoolExecutor:
     """A pool of ``jobs`` processes whose BLAS threads together do not exceed the cores."""
     threads = max(1, (os.cpu_count() or 1) // jobs)
     return ProcessPoolExecutor(max_workers=jobs, initializer=_share_the_cores, initargs=(threads,))
+
+
+def in_order(
+    task: Callable[[T], R],
+    items: Sequence[T],
+    jobs: int | None = None,
+    progress: Callable[[int], None] = lambda _: None,
+) -> Iterator[R]:
+    """``task`` of each item, yielded in the items' order: in this process with one job, else in a
+    ``worker_pool`` of ``jobs`` processes (default: the cores). ``progress`` is told of each task
+    as it finishes (``task`` must be picklable: a module-level function)."""
+    workers = jobs or os.cpu_count() or 1
+    if workers == 1:
+        for item in items:
+            result = task(item)
+            progress(1)
+            yield result
+        return
+    with worker_pool(workers) as pool:
+        futures: list[Future[R]] = []
+        for item in items:
+            future = pool.submit(task, item)
+            future.add_done_callback(lambda _: progress(1))
+            futures.append(future)
+        for future in futures:
+            yield future.result()
