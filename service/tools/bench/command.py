@@ -6,7 +6,7 @@ import argparse
 import dataclasses
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from service.tools.bench import mapping, search, suite
 from service.tools.progress import progress_bar
@@ -55,6 +55,11 @@ def _run_mapping(args: argparse.Namespace) -> int:
 ORACLE = "; ORACLE declaration (a perfect guard: a bound, not a result)"
 
 
+def _print_json(row: dict[str, Any], oracle: bool) -> None:
+    """One JSON object of a search or suite run; a bound under the oracle says so."""
+    print(json.dumps({**row, "oracle_declaration": True} if oracle else row), flush=True)
+
+
 def _fmt(value: float | None, spec: str) -> str:
     return "never" if value is None else format(value, spec)
 
@@ -89,10 +94,7 @@ def _run_search(args: argparse.Namespace) -> int:
         summaries.append(summary)
         results[summary.mapper, summary.planner] = batch
         if args.json:
-            row = summary.as_row()
-            if args.oracle_declaration:
-                row["oracle_declaration"] = True
-            print(json.dumps(row), flush=True)
+            _print_json(summary.as_row(), args.oracle_declaration)
         else:
             print(
                 f"{summary.mapper:<7}{summary.planner:<12}{summary.runs:>5}{summary.success_rate:>9.1%}"
@@ -209,10 +211,7 @@ def _run_suite(args: argparse.Namespace) -> int:
             )
         ):  # fmt: skip
             if args.json:
-                out = row.as_row()
-                if args.oracle_declaration:
-                    out["oracle_declaration"] = True
-                print(json.dumps(out), flush=True)
+                _print_json(row.as_row(), args.oracle_declaration)
             else:
                 print(row.line(), flush=True)
     return 0
