@@ -139,10 +139,6 @@ class PlanningConfig(_Section):
     """Plume lost with this share of the map within ``declaration.radius_m`` of the estimate: go
     on tracing toward the estimate instead of casting (0: always cast)."""
     lost_after_s: float = Field(default=30.0, gt=0)
-    flat_map_ratio: float = Field(default=2.0, ge=0)
-    """A map whose most likely cell holds less than this many times a uniform map's share has no
-    evidence left of where the source is: a cast that ends with such a map sweeps again instead of
-    heading for the map's estimate, an arbitrary cell (0: off)."""
     lone_contact_hits: int = Field(default=1, ge=0, le=1000)
     """A contact the sweep met with at most this many detections, then lost for
     ``lone_contact_lost_after_s``, goes back to the sweep where it stopped instead of casting
@@ -257,6 +253,7 @@ def apply_override(data: dict[str, Any], path: list[str], value: Any, text: str)
 _ALWAYS_CHECK = "removed: the check across the flow is flown however steady the odour; delete the key"
 _NO_ZIGZAG = "removed: plume finding chooses its legs from the map (there is no zigzag); delete the key"
 RETIRED_KEYS = {
+    "planning.flat_map_ratio": "removed: it never changed a mission of the world suite; delete the key",
     "planning.zigzag_spacing_m": _NO_ZIGZAG,
     "planning.zigzag_near_edge_spacings": _NO_ZIGZAG,
     **{

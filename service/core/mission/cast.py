@@ -1,9 +1,6 @@
 """``LOST``: the cast across the flow around the last detection (``planning.cast``), and when the
-map makes it pointless.
-
-With ``flat_map_ratio`` > 0, a cast that ends with a map holding no evidence (no cell above that
-many times a uniform map's share) sends the mission back to ``FIND``. With ``lost_trace_mass`` >
-0, while the estimate holds that share of the map the vehicle goes on tracing instead of casting.
+map makes it pointless: with ``lost_trace_mass`` > 0, while the estimate holds that share of the
+map the vehicle goes on tracing instead of casting.
 """
 
 from __future__ import annotations
@@ -46,15 +43,6 @@ class Cast:
     def waypoints(self, ctx: PlanContext, routing: Routing) -> tuple[Waypoint, ...] | None:
         """The legs still to fly; None once the cast is over."""
         return self.pattern.follow(ctx, routing)
-
-    def map_is_flat(self, likelihood: FloatArray) -> bool:
-        """Whether no cell holds ``flat_map_ratio`` times a uniform map's share (always False with
-        the ratio 0)."""
-        ratio = self.planning.flat_map_ratio
-        if ratio <= 0.0:
-            return False
-        total = float(likelihood.sum())
-        return total > 0.0 and float(likelihood.max()) * likelihood.size < ratio * total
 
     def map_knows_the_plume(self, likelihood: FloatArray) -> bool:
         """Whether the estimate holds ``lost_trace_mass`` of the map (within the declaration

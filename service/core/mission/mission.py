@@ -10,8 +10,6 @@ tracing, and source declaration". The states, each flown by its own behaviour:
   first.
 - ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
   last detection (``Cast``), then the planner again. A detection returns to ``TRACE``.
-  With ``flat_map_ratio`` > 0, a cast that ends with a map holding no evidence goes back to
-  ``FIND``: a new leg from where the vehicle is.
   With ``lone_contact_hits`` > 0, a contact met in ``FIND`` with at most that many detections is
   lost after ``lone_contact_lost_after_s`` instead, and goes back to ``FIND`` (a new leg from
   where it stopped, chosen by the map that now holds the contact): a false alarm (the
@@ -231,18 +229,10 @@ class Mission:
         return self._routing.route(self.planner, ctx) if wanted is None else wanted
 
     def _lost(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
-        likelihood = self.mapper.likelihood
-        if self._cast.map_knows_the_plume(likelihood):
+        if self._cast.map_knows_the_plume(self.mapper.likelihood):
             return self._trace(ctx)
         wanted = self._cast.waypoints(ctx, self._routing)
-        if wanted is not None:
-            return wanted
-        if self._cast.map_is_flat(likelihood):
-            # the cast is over and the map holds no evidence: its estimate is merely the first of
-            # nearly equal cells, so look for the plume again as before the first detection
-            self._go(Cue.FLAT_CAST)
-            return self._find(ctx)
-        return self._trace(ctx)
+        return self._trace(ctx) if wanted is None else wanted
 
     _BEHAVIOUR: ClassVar[dict[MissionState, Callable[[Mission, PlanContext], tuple[Waypoint, ...]]]] = {
         MissionState.FIND: _find,

@@ -18,7 +18,6 @@ class Cue(StrEnum):
     QUIET = "quiet"  # no detection for lost_after_s while tracing (and no check flown)
     LONE_QUIET = "lone quiet"  # a contact in FIND with at most lone_contact_hits detections,
     # not repeated for lone_contact_lost_after_s: most likely a false alarm
-    FLAT_CAST = "flat cast"  # the cast is over and the map holds no evidence (flat_map_ratio)
     CHECK = "check"  # a declaration rule fired and the check across the flow is to be flown
     SOURCE = "source"  # a declaration rule fired and its cell was vouched for
 
@@ -30,7 +29,6 @@ TRANSITIONS: Final[dict[tuple[MissionState, Cue], MissionState]] = {
     (LOST, Cue.ODOUR): TRACE,
     (TRACE, Cue.QUIET): LOST,  # a cast around the last detection
     (TRACE, Cue.LONE_QUIET): FIND,  # a new leg from where the vehicle is
-    (LOST, Cue.FLAT_CAST): FIND,  # a new leg from where the vehicle is
     (FIND, Cue.CHECK): TRACE,  # the check is flown while tracing, wherever the rule fired
     (LOST, Cue.CHECK): TRACE,
     (FIND, Cue.SOURCE): DECLARED,

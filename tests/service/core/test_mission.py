@@ -64,12 +64,11 @@ class ScriptedMapper(SourceMapper):
 PAPERS_PLANNING = PlanningConfig(
     lost_trace_mass=0.0,
     lost_after_s=20.0,
-    flat_map_ratio=0.0,
     lone_contact_hits=0,
     lone_contact_lost_after_s=20.0,
 )
 """The planning these tests were written against: the papers' mechanisms without the later guards
-(tracing on while lost, looking for the plume again on a flat map or after lone contacts); a
+(tracing on while lost, looking for the plume again after lone contacts); a
 test of one of those turns it on."""
 
 PAPERS_DECLARATION = DeclarationConfig(upflow_pass_m=0.0, check_width_m=0.0, persist_s=0.0)
@@ -490,44 +489,6 @@ def test_a_lost_plume_is_traced_on_while_the_estimate_holds_the_map(
         assert out.waypoints == (Waypoint(90.0, -30.0),)
     else:  # on toward the estimate: the same waypoints, so none are sent again
         assert (traced[-1].x, traced[-1].y) == AREA.centre(SOURCE)
-        assert out.waypoints is None
-
-
-@pytest.mark.parametrize(
-    ("peak", "ratio", "method", "looks_again"),
-    [
-        (None, 2.0, "astar", True),  # a uniform map: its estimate is merely the first cell
-        (0.00375, 2.0, "astar", True),  # 1.5 times the uniform share (1 / 400): no evidence
-        (0.00375, 0.0, "astar", False),  # off
-        (0.01, 2.0, "astar", False),  # 4 times: the map knows something, on toward its estimate
-    ],
-)
-def test_a_cast_that_ends_with_a_flat_map_looks_for_the_plume_again(
-    peak: float | None, ratio: float, method: str, looks_again: bool
-) -> None:
-    mapper = ScriptedMapper(AREA)
-    if peak is None:
-        mapper.set(np.ones(AREA.shape))
-    else:
-        mapper.peak_at(SOURCE, peak)
-    planning = PlanningConfig(
-        method=PlanningMethod(method), lost_after_s=10.0, cast_legs=0, flat_map_ratio=ratio
-    )
-    mission = Mission(AREA, mapper, planning, NEVER)
-    flow = (1.0, 0.0)
-    v = VehicleState(50.0, 10.0)
-    mission.step(Observation(4.0, v.x, v.y, *flow, False), v)
-    mission.step(Observation(5.0, v.x, v.y, *flow, True), v)
-    mission.step(Observation(6.0, v.x, v.y, *flow, True), v)  # two hits: not a lone contact
-    out = mission.step(Observation(16.0, v.x, v.y, *flow, False), v)  # lost; no cast legs
-    assert PlumeLost(16.0, v.x, v.y, 6.0) in out.events
-    if looks_again:  # a new leg from here
-        assert out.state is MissionState.FIND
-        assert out.waypoints is not None
-        (end,) = out.waypoints
-        assert math.dist((end.x, end.y), (v.x, v.y)) >= 5.0
-    else:  # on as it was going: the same waypoints, so none are sent again
-        assert out.state is MissionState.LOST
         assert out.waypoints is None
 
 

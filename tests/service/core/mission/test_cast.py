@@ -13,7 +13,7 @@ from service.core.planning.crossflow import FlowFrame
 from service.core.planning.safety import clamped_cell
 
 AREA = Grid(0.0, 100.0, -50.0, 50.0, columns=20, rows=20)  # 5 m cells
-PLANNING = PlanningConfig(cast_width_m=10.0, cast_legs=3, flat_map_ratio=2.0, lost_trace_mass=0.3)
+PLANNING = PlanningConfig(cast_width_m=10.0, cast_legs=3, lost_trace_mass=0.3)
 EAST = FlowFrame(1.0, 0.0)
 
 
@@ -36,14 +36,6 @@ def test_no_cast_without_a_detection_or_a_flow() -> None:
     assert c.pattern.vertices == ()
     c.lay((42.5, 2.5), None)
     assert c.pattern.vertices == ()
-
-
-def test_a_uniform_map_is_flat_a_peaked_one_is_not() -> None:
-    uniform = np.full(AREA.shape, 1.0 / AREA.size)
-    peaked = uniform.copy()
-    peaked.flat[7] *= 3.0
-    assert cast().map_is_flat(uniform)
-    assert not cast().map_is_flat(peaked / peaked.sum())
 
 
 def test_a_map_that_knows_the_plume_holds_the_share_near_its_estimate() -> None:

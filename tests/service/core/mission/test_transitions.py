@@ -21,11 +21,6 @@ def test_only_tracing_is_lost_and_a_lone_contact_goes_back_to_the_sweep() -> Non
     assert TRANSITIONS[TRACE, Cue.LONE_QUIET] is FIND
 
 
-def test_a_flat_map_after_the_cast_sweeps_again() -> None:
-    assert {s for (s, c) in TRANSITIONS if c is Cue.FLAT_CAST} == {LOST}
-    assert TRANSITIONS[LOST, Cue.FLAT_CAST] is FIND
-
-
 def test_the_source_may_be_declared_from_every_state_but_declared_is_final() -> None:
     assert all(TRANSITIONS[s, Cue.SOURCE] is DECLARED for s in (FIND, TRACE, LOST))
     # a check is flown while tracing, wherever its rule fired
