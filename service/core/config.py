@@ -135,9 +135,6 @@ class PlanningConfig(_Section):
     apf_obstacle_range_m: float = Field(default=5.0, gt=0)
     cast_width_m: float = Field(default=10.0, gt=0)
     cast_legs: int = Field(default=4, ge=0, le=100)
-    lost_trace_mass: float = Field(default=0.2, ge=0, le=1)
-    """Plume lost with this share of the map within ``declaration.radius_m`` of the estimate: go
-    on tracing toward the estimate instead of casting (0: always cast)."""
     lost_after_s: float = Field(default=30.0, gt=0)
     lone_contact_hits: int = Field(default=1, ge=0, le=1000)
     """A contact the sweep met with at most this many detections, then lost for
@@ -253,6 +250,7 @@ def apply_override(data: dict[str, Any], path: list[str], value: Any, text: str)
 _ALWAYS_CHECK = "removed: the check across the flow is flown however steady the odour; delete the key"
 _NO_ZIGZAG = "removed: plume finding chooses its legs from the map (there is no zigzag); delete the key"
 RETIRED_KEYS = {
+    "planning.lost_trace_mass": "removed: a lost plume is always cast for; delete the key",
     "planning.flat_map_ratio": "removed: it never changed a mission of the world suite; delete the key",
     "planning.zigzag_spacing_m": _NO_ZIGZAG,
     "planning.zigzag_near_edge_spacings": _NO_ZIGZAG,

@@ -14,8 +14,6 @@ tracing, and source declaration". The states, each flown by its own behaviour:
   lost after ``lone_contact_lost_after_s`` instead, and goes back to ``FIND`` (a new leg from
   where it stopped, chosen by the map that now holds the contact): a false alarm (the
   detector's, or a stray puff) is not worth a cast.
-  With ``lost_trace_mass`` > 0, while the estimate holds that share of the map the vehicle goes
-  on tracing instead of casting.
 - ``DECLARED``: a declaration rule fired and its cell was vouched for (``Declaring``); the
   vehicle holds. Rules are only judged after the first detection: before it a flat map's argmax
   never moves.
@@ -89,7 +87,7 @@ class Mission:
         decl = (declaration or DeclarationConfig()).for_mapper(mapper.name)
         self._declaring = Declaring(grid, decl, admit)
         self._prospect = Prospect(grid)
-        self._cast = Cast(grid, self.planning, decl.radius_m)
+        self._cast = Cast(grid, self.planning)
         self._emitter = Emitter(grid)
         self._state = MissionState.FIND
         self._last_time: float | None = None
@@ -229,8 +227,6 @@ class Mission:
         return self._routing.route(self.planner, ctx) if wanted is None else wanted
 
     def _lost(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
-        if self._cast.map_knows_the_plume(self.mapper.likelihood):
-            return self._trace(ctx)
         wanted = self._cast.waypoints(ctx, self._routing)
         return self._trace(ctx) if wanted is None else wanted
 

@@ -38,7 +38,12 @@ def test_unknown_key_is_named(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("section", "key"),
-    [("planning", "zigzag_spacing_m"), ("declaration", "steady_hit_rate"), ("planning", "flat_map_ratio")],
+    [
+        ("planning", "zigzag_spacing_m"),
+        ("declaration", "steady_hit_rate"),
+        ("planning", "flat_map_ratio"),
+        ("planning", "lost_trace_mass"),
+    ],
 )
 def test_a_removed_key_says_what_to_do(tmp_path: Path, section: str, key: str) -> None:
     with pytest.raises(ConfigError, match=rf"{section}\.{key}: removed: .*delete the key"):

@@ -62,14 +62,12 @@ class ScriptedMapper(SourceMapper):
 
 
 PAPERS_PLANNING = PlanningConfig(
-    lost_trace_mass=0.0,
     lost_after_s=20.0,
     lone_contact_hits=0,
     lone_contact_lost_after_s=20.0,
 )
-"""The planning these tests were written against: the papers' mechanisms without the later guards
-(tracing on while lost, looking for the plume again after lone contacts); a
-test of one of those turns it on."""
+"""The planning these tests were written against: the papers' mechanisms without the later guard
+(looking for the plume again after lone contacts); a test of it turns it on."""
 
 PAPERS_DECLARATION = DeclarationConfig(upflow_pass_m=0.0, check_width_m=0.0, persist_s=0.0)
 """The declaration these tests were written against: the papers' rules without the later guards
@@ -456,40 +454,18 @@ def test_find_chooses_a_new_leg_when_the_mean_flow_turns() -> None:
     assert len(chosen) == 1
 
 
-@pytest.mark.parametrize(
-    ("peak", "lost_trace_mass", "method", "casts"),
-    [
-        (0.3, 0.0, "astar", True),
-        (0.3, 0.2, "astar", False),
-        (0.1, 0.2, "astar", True),
-    ],
-)
-def test_a_lost_plume_is_traced_on_while_the_estimate_holds_the_map(
-    peak: float, lost_trace_mass: float, method: str, casts: bool
-) -> None:
+def test_a_lost_plume_is_cast_for_across_the_flow_through_the_last_detection() -> None:
     mapper = ScriptedMapper(AREA)
-    mapper.peak_at(SOURCE, peak)  # 5 m cells, radius 3 m: the mass near the estimate is the peak's
-    planning = PAPERS_PLANNING.model_copy(
-        update={
-            "method": PlanningMethod(method),
-            "lost_after_s": 10.0,
-            "cast_width_m": 10.0,
-            "cast_legs": 2,
-            "lost_trace_mass": lost_trace_mass,
-        }
-    )
+    mapper.peak_at(SOURCE, 0.3)  # however much of the map the estimate holds
+    planning = PAPERS_PLANNING.model_copy(update={"lost_after_s": 10.0, "cast_width_m": 10.0, "cast_legs": 2})
     mission = Mission(AREA, mapper, planning, NEVER)
     v = VehicleState(90.0, -40.0)
     mission.step(Observation(4.0, v.x, v.y, 1.0, 0.0, False), v)  # a tick of flow
-    traced = mission.step(Observation(5.0, v.x, v.y, 1.0, 0.0, True), v).waypoints
-    assert traced is not None
+    assert mission.step(Observation(5.0, v.x, v.y, 1.0, 0.0, True), v).waypoints is not None
+    assert mission.step(Observation(14.0, v.x, v.y, 1.0, 0.0, False), v).state is MissionState.TRACE
     out = mission.step(Observation(15.0, v.x, v.y, 1.0, 0.0, False), v)
     assert out.state is MissionState.LOST
-    if casts:  # across the flow through the last detection
-        assert out.waypoints == (Waypoint(90.0, -30.0),)
-    else:  # on toward the estimate: the same waypoints, so none are sent again
-        assert (traced[-1].x, traced[-1].y) == AREA.centre(SOURCE)
-        assert out.waypoints is None
+    assert out.waypoints == (Waypoint(90.0, -30.0),)
 
 
 @pytest.mark.parametrize(

@@ -1,6 +1,4 @@
-"""The cast owns its legs around the last detection, and knows when the map makes it pointless."""
-
-import numpy as np
+"""The cast owns its legs around the last detection."""
 
 from service.core.config import PlanningConfig
 from service.core.grid import Grid
@@ -13,12 +11,12 @@ from service.core.planning.crossflow import FlowFrame
 from service.core.planning.safety import clamped_cell
 
 AREA = Grid(0.0, 100.0, -50.0, 50.0, columns=20, rows=20)  # 5 m cells
-PLANNING = PlanningConfig(cast_width_m=10.0, cast_legs=3, lost_trace_mass=0.3)
+PLANNING = PlanningConfig(cast_width_m=10.0, cast_legs=3)
 EAST = FlowFrame(1.0, 0.0)
 
 
 def cast() -> Cast:
-    return Cast(AREA, PLANNING, radius_m=3.0)
+    return Cast(AREA, PLANNING)
 
 
 def test_the_cast_is_laid_across_the_flow_through_the_last_detection() -> None:
@@ -36,10 +34,3 @@ def test_no_cast_without_a_detection_or_a_flow() -> None:
     assert c.pattern.vertices == ()
     c.lay((42.5, 2.5), None)
     assert c.pattern.vertices == ()
-
-
-def test_a_map_that_knows_the_plume_holds_the_share_near_its_estimate() -> None:
-    pi = np.full(AREA.shape, 0.5 / (AREA.size - 1))
-    pi.flat[AREA.cell_of(42.5, 2.5)] = 0.5
-    assert cast().map_knows_the_plume(pi)
-    assert not cast().map_knows_the_plume(np.full(AREA.shape, 1.0 / AREA.size))
