@@ -16,14 +16,17 @@ to first order when the cell is small compared with the spread.
 Drift uncertainty (ours, off by default): V is the flow record *at the vehicle*, but in a flow that
 varies in space (seed hmm-plume-mapping §V, a meandering plume) a filament elsewhere drifted with
 a different flow. With ``drift_spread`` = k > 0 each axis gets, besides the random walk, a drift
-error whose standard deviation grows linearly with the lag, k s tau, where s (m/s) is the standard
-deviation of that flow component over the window (so |u| times the spread of the flow direction
-across the flow, the std of the speed along it). The spread of eq. 4 per axis then becomes
+error: k times the spread of the flow's fluctuation summed over the n = tau / dt ticks of the lag.
+Per axis the fluctuation's std s (m/s) and its tick-to-tick correlation rho are measured over the
+window, and the sum is that of a first-order autoregressive process:
 
-    s_tau = sqrt(sigma^2 tau + (k s tau)^2)                                  (drift-spread eq. D1)
+    e_tau = k s dt sqrt(n (1 + rho) / (1 - rho) - 2 rho (1 - rho^n) / (1 - rho)^2)
+    s_tau = sqrt(sigma^2 tau + e_tau^2)                                      (drift-spread eq. D1)
 
-The error is taken as fully correlated over the lag (a meander persists), hence linear in tau
-rather than the random walk's sqrt(tau); the axes stay independent, so p_ij stays separable.
+A fluctuation that persists (rho -> 1: a meander, a turn of the flow) gives e_tau = k s tau, an
+error linear in the lag; one that changes every tick (rho = 0: white noise, as in the papers'
+turbulent case, whose flow is the same everywhere and whose record is exact) gives k s sqrt(tau dt),
+a random walk no wider than the filament's own. The axes stay independent, so p_ij stays separable.
 
 A release older than the service (ours): a source has usually been releasing long before the
 vehicle arrives, and the flow before the first tick is unknown, not absent. Counting only the
@@ -103,6 +106,35 @@ def flow_spread(history: Iterable[FlowStep]) -> tuple[float, float]:
     return sx, sy
 
 
+def flow_persistence(history: Iterable[FlowStep]) -> tuple[float, float]:
+    """Tick-to-tick (lag-one) autocorrelation of the flow's x and y components over ``history``,
+    clipped to [0, 1]; 0 with fewer than three ticks or for a component that never varied."""
+    steps = list(history)
+    if len(steps) < 3:
+        return 0.0, 0.0
+    dt = np.fromiter((s.dt_s for s in steps), dtype=float, count=len(steps))
+    rho = []
+    for moved in ((s.dx_m for s in steps), (s.dy_m for s in steps)):
+        u = np.fromiter(moved, dtype=float, count=len(steps)) / dt
+        d = u - u.mean()
+        variance = float(np.dot(d, d))
+        r = float(np.dot(d[:-1], d[1:])) / variance if variance > 0.0 else 0.0
+        rho.append(min(max(r, 0.0), 1.0))
+    return rho[0], rho[1]
+
+
+def drift_error_m(lag_s: FloatArray, dt_s: float, sd_mps: float, rho: float) -> FloatArray:
+    """Std (m) of a flow fluctuation (std ``sd_mps``, tick-to-tick correlation ``rho``) summed over
+    the lag_s / dt_s ticks of each lag: e_tau of eq. D1 without k."""
+    n = lag_s / dt_s
+    if rho >= 1.0:
+        ticks = n**2
+    else:
+        ticks = n * (1.0 + rho) / (1.0 - rho) - 2.0 * rho * (1.0 - rho**n) / (1.0 - rho) ** 2
+    error: FloatArray = sd_mps * dt_s * np.sqrt(np.maximum(ticks, 0.0))
+    return error
+
+
 def axis_cell_mass(edges: FloatArray, centre: FloatArray, spread: FloatArray) -> FloatArray:
     """Mass of N(centre_l, spread_l^2) between consecutive ``edges``, shape (W, len(edges) - 1).
 
@@ -130,8 +162,8 @@ def filament_factors(
     drift_y_m: FloatArray,
     sigma_x: float,
     sigma_y: float,
-    drift_sd_x_mps: float = 0.0,
-    drift_sd_y_mps: float = 0.0,
+    drift_error_x_m: FloatArray | None = None,
+    drift_error_y_m: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Per-axis factors Px (W, m), Py (W, n) of p_ij(t_l, t_k) for a vehicle cell centred at (x, y).
 
@@ -139,15 +171,16 @@ def filament_factors(
     from a source in cell (row, col) is in the vehicle's cell now: the mass over cell C_i of the
     source position of eq. 4, X_s ~ N(X_j - V(t_l, t_k), (t_k - t_l) sigma^2), which is the same
     as the mass of the filament over C_j (pomdp-astar eq. 1, exact per cell rather than midpoint).
-    ``drift_sd_*_mps`` (k s of eq. D1, m/s) widen it by a drift error growing linearly with the lag.
+    ``drift_error_*_m`` (e_tau of eq. D1, one per release time, m) widen it by the drift error.
     """
     x_edges: FloatArray = grid.x_min + np.arange(grid.columns + 1, dtype=np.float64) * grid.cell_width_m
     y_edges: FloatArray = grid.y_min + np.arange(grid.rows + 1, dtype=np.float64) * grid.cell_height_m
     # reactive-planning eq. 4: X_s = X_j - V(t_l, t_k) - W(t_l, t_k), W's spread per eq. D1
     # (hypot(a, 0) is exactly a: with no drift error the papers' spread, bit for bit)
     root_lag = np.sqrt(lag_s)
-    spread_x = np.hypot(sigma_x * root_lag, drift_sd_x_mps * lag_s)
-    spread_y = np.hypot(sigma_y * root_lag, drift_sd_y_mps * lag_s)
+    no_error = np.zeros_like(lag_s)
+    spread_x = np.hypot(sigma_x * root_lag, no_error if drift_error_x_m is None else drift_error_x_m)
+    spread_y = np.hypot(sigma_y * root_lag, no_error if drift_error_y_m is None else drift_error_y_m)
     px = axis_cell_mass(x_edges, x_m - drift_x_m, spread_x)
     py = axis_cell_mass(y_edges, y_m - drift_y_m, spread_y)
     return px, py
@@ -169,13 +202,17 @@ def history_factors(
     ``drift_spread`` is k of eq. D1 (0: the papers' model); ``reach_m`` > 0 adds the prehistory."""
     steps = list(history)
     lag, drift_x, drift_y = release_offsets(steps, reach_m)
-    sd_x, sd_y = flow_spread(steps) if drift_spread > 0.0 else (0.0, 0.0)
     if zero_lag:
         # a continuous source has odour at its own position now; the papers' releases stop at the
         # previous tick, so a vehicle in the source's cell would need last tick's filament not to
         # have left the cell (it often has, at 1 m/s in a 2.5 m cell) to expect a detection
         lag, drift_x, drift_y = (np.concatenate([[0.0], a]) for a in (lag, drift_x, drift_y))
     x, y = grid.centre(cell)
-    return filament_factors(
-        grid, x, y, lag, drift_x, drift_y, sigma_x, sigma_y, drift_spread * sd_x, drift_spread * sd_y
-    )
+    error_x = error_y = None
+    if drift_spread > 0.0 and steps:
+        sd_x, sd_y = flow_spread(steps)
+        rho_x, rho_y = flow_persistence(steps)
+        dt = float(np.mean([s.dt_s for s in steps]))
+        error_x = drift_spread * drift_error_m(lag, dt, sd_x, rho_x)
+        error_y = drift_spread * drift_error_m(lag, dt, sd_y, rho_y)
+    return filament_factors(grid, x, y, lag, drift_x, drift_y, sigma_x, sigma_y, error_x, error_y)

@@ -39,8 +39,10 @@ class MapperParams:
     sigma_y: float = 1.0
     drift_spread: float = 0.0
     """Gain k of the drift uncertainty (filament eq. D1), dimensionless: a filament of lag tau gets an
-    extra per-axis spread k s tau, s the std (m/s) of that flow component over the window
-    (Bayesian and POMDP mappers; 0: the papers' model)."""
+    extra per-axis spread k times the std of that flow component's fluctuation summed over the lag,
+    from its std and tick-to-tick correlation over the window: linear in the lag for a fluctuation
+    that persists, a random walk for one that does not (Bayesian and POMDP mappers; 0: the papers'
+    model)."""
     forgetting: float = 0.0
     """Share of pi handed back to the uniform prior after each update (Bayesian and POMDP
     mappers; 0: the papers' models). The models take the flow at the vehicle for the flow
