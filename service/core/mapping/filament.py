@@ -45,7 +45,7 @@ ordered newest release first (shortest lag first).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -91,15 +91,21 @@ def release_offsets(
     )
 
 
+def flow_velocities(steps: Sequence[FlowStep]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Each tick's duration dt (s) and the flow's x and y components (m/s) over ``steps``."""
+    dt = np.fromiter((s.dt_s for s in steps), dtype=float, count=len(steps))
+    ux = np.fromiter((s.dx_m for s in steps), dtype=float, count=len(steps)) / dt
+    uy = np.fromiter((s.dy_m for s in steps), dtype=float, count=len(steps)) / dt
+    return dt, ux, uy
+
+
 def flow_spread(history: Iterable[FlowStep]) -> tuple[float, float]:
     """Standard deviation (m/s) of the flow's x and y components over ``history``, each tick
     weighted by its duration; (0, 0) with fewer than two ticks."""
     steps = list(history)
     if len(steps) < 2:
         return 0.0, 0.0
-    dt = np.fromiter((s.dt_s for s in steps), dtype=float, count=len(steps))
-    ux = np.fromiter((s.dx_m for s in steps), dtype=float, count=len(steps)) / dt
-    uy = np.fromiter((s.dy_m for s in steps), dtype=float, count=len(steps)) / dt
+    dt, ux, uy = flow_velocities(steps)
     weights = dt / dt.sum()
     sx = float(np.sqrt(np.dot(weights, (ux - np.dot(weights, ux)) ** 2)))
     sy = float(np.sqrt(np.dot(weights, (uy - np.dot(weights, uy)) ** 2)))
@@ -112,10 +118,9 @@ def flow_persistence(history: Iterable[FlowStep]) -> tuple[float, float]:
     steps = list(history)
     if len(steps) < 3:
         return 0.0, 0.0
-    dt = np.fromiter((s.dt_s for s in steps), dtype=float, count=len(steps))
+    _, ux, uy = flow_velocities(steps)
     rho = []
-    for moved in ((s.dx_m for s in steps), (s.dy_m for s in steps)):
-        u = np.fromiter(moved, dtype=float, count=len(steps)) / dt
+    for u in (ux, uy):
         d = u - u.mean()
         variance = float(np.dot(d, d))
         r = float(np.dot(d[:-1], d[1:])) / variance if variance > 0.0 else 0.0
@@ -178,9 +183,8 @@ def filament_factors(
     # reactive-planning eq. 4: X_s = X_j - V(t_l, t_k) - W(t_l, t_k), W's spread per eq. D1
     # (hypot(a, 0) is exactly a: with no drift error the papers' spread, bit for bit)
     root_lag = np.sqrt(lag_s)
-    no_error = np.zeros_like(lag_s)
-    spread_x = np.hypot(sigma_x * root_lag, no_error if drift_error_x_m is None else drift_error_x_m)
-    spread_y = np.hypot(sigma_y * root_lag, no_error if drift_error_y_m is None else drift_error_y_m)
+    spread_x = np.hypot(sigma_x * root_lag, 0.0 if drift_error_x_m is None else drift_error_x_m)
+    spread_y = np.hypot(sigma_y * root_lag, 0.0 if drift_error_y_m is None else drift_error_y_m)
     px = axis_cell_mass(x_edges, x_m - drift_x_m, spread_x)
     py = axis_cell_mass(y_edges, y_m - drift_y_m, spread_y)
     return px, py
