@@ -4,7 +4,10 @@ probe at the estimate. The rule itself is
 
 With ``declaration.check_width_m`` > 0 a rule that fires first sends the vehicle across the flow
 ``check_upflow_m`` upflow of the estimate (``Check``), and the source is declared when that pass
-is flown; odour found upflow of the estimate, or another estimate, calls it off. A plume that
+is flown; odour found upflow of the estimate, or another estimate, calls it off. Near a cell whose
+pass was called off by odour upflow, the clean passes must outnumber the called-off ones: a patchy
+plume is missed on a pass now and then, and a rule that fires again after each call-off would
+otherwise end in the pass that missed. A plume that
 swung off the vehicle's line looks to the maps like the upflow end of a plume; the check looks
 for it where it would be. Steady odour near the estimate does not make the check needless: a
 strong plume is smelt as steadily far downflow of its source. At the estimate the vehicle probes
@@ -86,10 +89,11 @@ class Check:
     def holds(self, obs: Observation, estimated_cell: int) -> bool:
         if estimated_cell != self.cell:
             return False
-        if not obs.detected:
-            return True
-        # how far upflow of the centre the odour was
-        return self.frame.along(self.found.x - obs.x, self.found.y - obs.y) < self.cancel_upflow_m
+        return not (obs.detected and self.odour_upflow(obs))
+
+    def odour_upflow(self, obs: Observation) -> bool:
+        """Whether ``obs`` was made ``cancel_upflow_m`` or more upflow of the cell's centre."""
+        return self.frame.along(self.found.x - obs.x, self.found.y - obs.y) >= self.cancel_upflow_m
 
     def waypoints(self, ctx: PlanContext, routing: Routing) -> tuple[Waypoint, ...]:
         """The legs still to fly; once they are flown, hold where the vehicle is (``done``)."""
@@ -240,6 +244,7 @@ class Declaring:
     def __init__(self, grid: Grid, config: DeclarationConfig, admit: Callable[[int], bool] | None) -> None:
         self.grid = grid
         self.config = config
+        self._passes: list[tuple[float, float, int]] = []  # checked (x, y): +1 flown clean, -1 called off
         self._declarer = Declarer(grid, config, admit)
         self.check: Check | None = None  # the upflow check of a cell about to be declared
         reach_m = PROBE_REACH * math.hypot(grid.cell_width_m, grid.cell_height_m)
@@ -255,7 +260,10 @@ class Declaring:
 
     def recheck(self, obs: Observation, likelihood: FloatArray) -> None:
         """Call the check off if this tick's odour or estimate says so."""
-        if self.check is not None and not self.check.holds(obs, int(np.argmax(likelihood))):
+        check = self.check
+        if check is not None and not check.holds(obs, int(np.argmax(likelihood))):
+            if obs.detected and check.odour_upflow(obs):
+                self._passes.append((check.found.x, check.found.y, -1))
             self.check = None
 
     def reset(self) -> None:
@@ -275,9 +283,12 @@ class Declaring:
         found = self._declarer.update(t, likelihood, (obs.x, obs.y), flow, obs.detected)
         if self.check is not None and self.check.done:
             # flown with no odour upflow: the rule fired at the estimate when the check began
-            cell = self.check.cell
+            check, self.check = self.check, None
+            if not self._vouched(check):
+                return None  # the rule has to fire anew for another pass
+            cell = check.cell
             flown = replace(
-                self.check.found,
+                check.found,
                 time_s=t,
                 probability=float(likelihood.flat[cell]),
                 mass=mass_within(self.grid, likelihood, cell, self.config.radius_m),
@@ -298,6 +309,23 @@ class Declaring:
         if self.probe.stopped_short:
             self._declarer.accept_pass()
         return waypoints
+
+    def _vouched(self, check: Check) -> bool:
+        """Whether ``check``, just flown clean, vouches for its cell: with it, the clean passes of
+        checks within ``radius_m`` of the cell outnumber those called off there by odour upflow.
+        Each pass is one draw of a patchy plume; counting only the last one would let a run of
+        call-offs end in the one pass that happened to miss. A pass not enough yet is counted."""
+        x, y = check.found.x, check.found.y
+        if self.passes_near(x, y) + 1 >= 1:
+            return True
+        self._passes.append((x, y, 1))
+        return False
+
+    def passes_near(self, x: float, y: float) -> int:
+        """Clean passes less passes called off by odour upflow, of the checks within ``radius_m``
+        of (x, y)."""
+        r = self.config.radius_m
+        return sum(vote for cx, cy, vote in self._passes if math.hypot(cx - x, cy - y) <= r)
 
     def _vouch(self, found: Declaration, frame: FlowFrame | None) -> CrossCheck | Check | None:
         """How ``found`` may be declared now without the upflow check (off); else the check of its

@@ -120,6 +120,43 @@ def test_a_rule_that_fires_starts_the_check_and_the_cell_is_declared_once_it_is_
     assert (verdict.time_s, verdict.x, verdict.y, verdict.probability) == (2.0, SX, SY, 0.85)
 
 
+def flown_clean(declaring: Declaring, t: float) -> SourceDeclared | Check | None:
+    """Fire the rule at the source, fly its check with no odour, and judge the tick after."""
+    check = declaring.judge(odour(t, SX, SY), peaked(), EAST)
+    assert isinstance(check, Check)
+    check.done = True
+    return declaring.judge(odour(t + 1.0, SX - 3.0, SY - 6.0, detected=False), peaked(), EAST)
+
+
+def test_after_a_pass_called_off_by_odour_upflow_two_clean_passes_declare_the_cell() -> None:
+    declaring = Declaring(AREA, CONFIG, None)
+    declaring.arm(0.0, peaked())
+    assert isinstance(declaring.judge(odour(0.0, SX, SY), peaked(), EAST), Check)
+    declaring.recheck(odour(1.0, SX - 2.0, SY + 1.0), peaked())  # odour 2 m upflow
+    assert declaring.check is None
+    assert declaring.passes_near(SX, SY) == -1
+    assert flown_clean(declaring, 2.0) is None  # even: one more pass
+    assert declaring.check is None
+    assert declaring.passes_near(SX, SY) == 0
+    verdict = flown_clean(declaring, 4.0)
+    assert isinstance(verdict, SourceDeclared)
+    assert verdict.check is CrossCheck.FLOWN
+
+
+def test_only_odour_upflow_near_the_cell_counts_against_its_passes() -> None:
+    declaring = Declaring(AREA, CONFIG, None)
+    declaring.arm(0.0, peaked())
+    far = AREA.cell_of(SX + 20.0, SY)
+    fx, fy = AREA.centre(far)
+    assert isinstance(declaring.judge(odour(0.0, fx, fy), peaked(far), EAST), Check)
+    declaring.recheck(odour(1.0, fx - 2.0, fy), peaked(far))  # called off 20 m downflow of SOURCE
+    assert declaring.passes_near(fx, fy) == -1
+    assert isinstance(declaring.judge(odour(2.0, SX, SY), peaked(), EAST), Check)
+    declaring.recheck(odour(3.0, SX, SY, detected=False), peaked(far))  # the estimate moved: no odour
+    assert declaring.passes_near(SX, SY) == 0
+    assert isinstance(flown_clean(declaring, 4.0), SourceDeclared)
+
+
 def test_recheck_calls_the_check_off_when_the_estimate_moves() -> None:
     declaring = Declaring(AREA, CONFIG, None)
     declaring.arm(0.0, peaked())
