@@ -321,6 +321,20 @@ class Declaring:
         self._passes.append((x, y, 1))
         return False
 
+    @property
+    def passes(self) -> list[tuple[float, float, int]]:
+        """Every check counted so far: (x, y) of its cell, +1 flown clean, -1 called off by odour
+        upflow (for the restart snapshot)."""
+        return list(self._passes)
+
+    def restore_passes(self, passes: list[tuple[float, float, int]]) -> None:
+        """Count ``passes`` (``passes``' form) as this mission's own; ValueError for a vote that is not
+        +1 or -1 or a point that is not finite."""
+        restored = [(float(x), float(y), int(vote)) for x, y, vote in passes]
+        if any(vote not in (1, -1) or not (math.isfinite(x) and math.isfinite(y)) for x, y, vote in restored):
+            raise ValueError("malformed check tally")
+        self._passes = restored
+
     def passes_near(self, x: float, y: float) -> int:
         """Clean passes less passes called off by odour upflow, of the checks within ``radius_m``
         of (x, y)."""

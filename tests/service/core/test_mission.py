@@ -1,4 +1,5 @@
 import itertools
+import json
 import math
 from collections import deque
 
@@ -615,6 +616,30 @@ def test_odour_upflow_of_the_estimate_calls_the_check_off() -> None:
     out, visited = fly_dry_until_declared(mission, vehicle, out, range(2, 12))
     assert out.state is MissionState.DECLARED
     assert visited[-2:] == [(sx - 3.0, sy - 6.0)] * 2  # the far side of the new check, then declared
+
+
+def test_the_checks_tally_survives_a_restart() -> None:
+    mapper, mission, vehicle, out = start_check()
+    sx, sy = AREA.centre(SOURCE)
+    vehicle.follow(out.waypoints)
+    vehicle.move()
+    mission.step(Observation(1.0, vehicle.x, vehicle.y, 1.0, 0.0, True), vehicle.state)  # odour 3 m upflow
+    state = json.loads(json.dumps(mission.save_state()))  # as the snapshot stores it
+    assert state["check_passes"] == [[sx, sy, -1]]
+
+    def dry_ticks_to_declare(saved: dict[str, object]) -> int:
+        restarted = mission_with(mapper, probability=0.8, check_width_m=6.0, check_upflow_m=3.0)
+        restarted.restore_state(saved)
+        here = Vehicle(vehicle.x, vehicle.y)
+        first = restarted.step(Observation(2.0, here.x, here.y, 1.0, 0.0, False), here.state)
+        done, visited = fly_dry_until_declared(restarted, here, first, range(3, 30))
+        assert done.state is MissionState.DECLARED
+        return len(visited)
+
+    forgotten = {k: v for k, v in state.items() if k != "check_passes"}  # a snapshot from before the tally
+    assert dry_ticks_to_declare(state) > dry_ticks_to_declare(forgotten)  # two clean passes, not one
+    with pytest.raises(ValueError, match="tally"):
+        mission_with(mapper).restore_state({**state, "check_passes": [[sx, sy, 2]]})
 
 
 @pytest.mark.parametrize("back_to", [MissionState.FIND, MissionState.LOST])
