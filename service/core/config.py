@@ -159,7 +159,7 @@ class DeclarationConfig(_Section):
     check_width_m: float = Field(default=8.0, ge=0)
     """Before naming a cell, cross the flow ``check_upflow_m`` upflow of its centre, this far to
     either side, m (0: off); odour found upflow there calls the declaration off."""
-    persist_s: float = Field(default=20.0, ge=0)
+    persist_s: float = Field(default=10.0, ge=0)
     """No rule fires until odour has been detected within ``visit_radius_m`` of the estimate at
     two times at least this far apart, s (0: off). Bayesian mappers only, like the upflow pass it
     guards (farrell2003, hmm + astar, 200 runs: 64 % -> 53.5 %)."""

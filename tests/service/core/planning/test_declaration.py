@@ -137,7 +137,7 @@ def test_persist_waits_for_odour_near_the_estimate_at_two_times_far_enough_apart
 
 
 def test_persist_is_on_by_default_off_at_0_and_for_the_hmm() -> None:
-    assert DeclarationConfig().persist_s == 20.0
+    assert DeclarationConfig().persist_s == 10.0
     assert DeclarationConfig().for_mapper("hmm").persist_s == 0.0
     assert DeclarationConfig(persist_s=20.0).for_mapper("hmm").persist_s == 0.0
     assert DeclarationConfig(persist_s=20.0).for_mapper("pomdp").persist_s == 20.0
