@@ -124,11 +124,10 @@ class Mission:
         checks' tally goes on, so a cell whose pass met odour upflow still needs its clean passes
         (a snapshot from before the tally was saved has none)."""
         phase = MissionState(state["phase"])
-        last_time = None if state["last_time"] is None else float(state["last_time"])
+        self._last_time = None if state["last_time"] is None else float(state["last_time"])
         t = state["last_detection_t"]
         x, y = state["last_detection_x"], state["last_detection_y"]
         self._declaring.restore_passes(state.get("check_passes", []))
-        self._last_time = last_time
         self._last_detection = None if t is None else (float(t), float(x), float(y))
         self._state = phase
         if phase is not MissionState.FIND and self._last_time is not None:
