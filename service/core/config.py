@@ -133,13 +133,11 @@ class PlanningConfig(_Section):
     apf_step_m: float = Field(default=2.0, gt=0)
     apf_obstacle_gain: float = Field(default=1.0, ge=0)
     apf_obstacle_range_m: float = Field(default=5.0, gt=0)
-    cast_width_m: float = Field(default=10.0, gt=0)
-    cast_legs: int = Field(default=4, ge=0, le=100)
     lost_after_s: float = Field(default=30.0, gt=0)
     lone_contact_hits: int = Field(default=1, ge=0, le=1000)
     """A contact the sweep met with at most this many detections, then lost for
-    ``lone_contact_lost_after_s``, goes back to the sweep where it stopped instead of casting
-    (0: always cast)."""
+    ``lone_contact_lost_after_s``, goes back to the sweep where it stopped instead of tracing on
+    (0: always trace on)."""
     lone_contact_lost_after_s: float = Field(default=5.0, gt=0)
     """How long a lone contact (``lone_contact_hits``) waits for another detection, s."""
 
@@ -248,9 +246,12 @@ def apply_override(data: dict[str, Any], path: list[str], value: Any, text: str)
 
 
 _ALWAYS_CHECK = "removed: the check across the flow is flown however steady the odour; delete the key"
+_NO_CAST = "removed: a lost plume is traced on toward the map's estimate (there is no cast); delete the key"
 _NO_ZIGZAG = "removed: plume finding chooses its legs from the map (there is no zigzag); delete the key"
 RETIRED_KEYS = {
-    "planning.lost_trace_mass": "removed: a lost plume is always cast for; delete the key",
+    "planning.lost_trace_mass": _NO_CAST,
+    "planning.cast_width_m": _NO_CAST,
+    "planning.cast_legs": _NO_CAST,
     "planning.flat_map_ratio": "removed: it never changed a mission of the world suite; delete the key",
     "planning.zigzag_spacing_m": _NO_ZIGZAG,
     "planning.zigzag_near_edge_spacings": _NO_ZIGZAG,

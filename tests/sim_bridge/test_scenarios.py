@@ -151,12 +151,12 @@ def test_unknown_names_and_bad_files_are_reported(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="no such scenario file"):
         load_scenario(tmp_path / "absent.toml")
     tuned = tmp_path / "tuned.toml"
-    tuned.write_text("[planning]\ncast_width_m = 10.0\n[world]\nseed = 1\n", encoding="utf-8")
+    tuned.write_text("[planning]\nlost_after_s = 10.0\n[world]\nseed = 1\n", encoding="utf-8")
     with pytest.raises(ConfigError, match=r"tuned\.toml: \[planning\]: a scenario sets only"):
         load_scenario(tuned)
     # the search settings still come from the command line
-    spaced = load_scenario("wang-laminar", ["planning.cast_width_m=12"])
-    assert spaced.config.planning.cast_width_m == 12.0
+    patient = load_scenario("wang-laminar", ["planning.lost_after_s=12"])
+    assert patient.config.planning.lost_after_s == 12.0
 
 
 def test_spin_up_starts_the_mission_with_a_developed_plume() -> None:

@@ -28,8 +28,7 @@ import numpy as np
 from service.core.mission.events import CrossCheck, SourceDeclared
 from service.core.mission.pattern import ARRIVAL_M, Pattern
 from service.core.planning.base import Waypoint
-from service.core.planning.cast import cast_vertices
-from service.core.planning.crossflow import upflow_until
+from service.core.planning.crossflow import pass_across, upflow_until
 from service.core.planning.declaration import Declarer, mass_within
 from service.core.planning.probe import information
 from service.core.planning.safety import segment_clear
@@ -79,7 +78,7 @@ class Check:
         upflow = config.check_upflow_m
         clear = upflow_until(grid, found.x, found.y, frame, upflow, lambda x, y: not grid.in_obstacle(x, y))
         ax, ay = clear if clear is not None else (found.x - upflow * frame.ux, found.y - upflow * frame.uy)
-        legs = cast_vertices(grid, ax, ay, frame, config.check_width_m, 2)
+        legs = pass_across(grid, ax, ay, frame, config.check_width_m)
         return cls(found, frame, 0.5 * upflow, Pattern(legs))
 
     @property

@@ -8,12 +8,14 @@ tracing, and source declaration". The states, each flown by its own behaviour:
 - ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate; the
   declaration's legs (``Declaring``: the check across the flow, the probe at the estimate) go
   first.
-- ``LOST``: no detection for ``lost_after_s`` while tracing; a cast across the flow around the
-  last detection (``Cast``), then the planner again. A detection returns to ``TRACE``.
+- ``LOST``: no detection for ``lost_after_s`` while tracing; the vehicle flies on as in
+  ``TRACE``, toward the map's estimate, which holds the misses since (a cast across the flow
+  around the last detection was measured and deleted: docs/search-benchmark.md, step 15). A
+  detection returns to ``TRACE``.
   With ``lone_contact_hits`` > 0, a contact met in ``FIND`` with at most that many detections is
   lost after ``lone_contact_lost_after_s`` instead, and goes back to ``FIND`` (a new leg from
   where it stopped, chosen by the map that now holds the contact): a false alarm (the
-  detector's, or a stray puff) is not worth a cast.
+  detector's, or a stray puff) is not worth a trace.
 - ``DECLARED``: a declaration rule fired and its cell was vouched for (``Declaring``); the
   vehicle holds. Rules are only judged after the first detection: before it a flat map's argmax
   never moves.
@@ -36,7 +38,6 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from service.core.config import DeclarationConfig, PlanningConfig
-from service.core.mission.cast import Cast
 from service.core.mission.declaring import Check, Declaring
 from service.core.mission.emitter import Emitter
 from service.core.mission.events import (
@@ -87,7 +88,6 @@ class Mission:
         decl = (declaration or DeclarationConfig()).for_mapper(mapper.name)
         self._declaring = Declaring(grid, decl, admit)
         self._prospect = Prospect(grid)
-        self._cast = Cast(grid, self.planning)
         self._emitter = Emitter(grid)
         self._state = MissionState.FIND
         self._last_time: float | None = None
@@ -119,7 +119,7 @@ class Mission:
         }
 
     def restore_state(self, state: dict[str, Any]) -> None:
-        """Continue in the phase ``save_state`` saved; a leg or cast pattern is laid out anew,
+        """Continue in the phase ``save_state`` saved; a leg is laid out anew,
         and past the first detection the declaration rule is re-armed from the restored map. The
         checks' tally goes on, so a cell whose pass met odour upflow still needs its clean passes
         (a snapshot from before the tally was saved has none)."""
@@ -217,9 +217,7 @@ class Mission:
         if cue is not Cue.CHECK:
             self._declaring.reset()
         self._contact_hits = 0 if from_find and cue is Cue.ODOUR else None
-        if self._state is MissionState.LOST:
-            self._cast.lay(None if self._last_detection is None else self._last_detection[1:], self._frame)
-        elif self._state is MissionState.FIND:
+        if self._state is MissionState.FIND:
             self._prospect.restart()
 
     # -- behaviours: the waypoints each state wants, before the safety rule -------------------
@@ -231,12 +229,8 @@ class Mission:
         wanted = self._declaring.waypoints(ctx, self._routing, self._frame)
         return self._routing.route(self.planner, ctx) if wanted is None else wanted
 
-    def _lost(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
-        wanted = self._cast.waypoints(ctx, self._routing)
-        return self._trace(ctx) if wanted is None else wanted
-
     _BEHAVIOUR: ClassVar[dict[MissionState, Callable[[Mission, PlanContext], tuple[Waypoint, ...]]]] = {
         MissionState.FIND: _find,
         MissionState.TRACE: _trace,
-        MissionState.LOST: _lost,
+        MissionState.LOST: _trace,
     }

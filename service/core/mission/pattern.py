@@ -1,6 +1,6 @@
 """A pattern: turning points flown in order, and how far along them the vehicle is.
 
-The plume finder, the cast and the check each own one; the same rule flies them all."""
+The plume finder and the check each own one; the same rule flies them all."""
 
 from __future__ import annotations
 

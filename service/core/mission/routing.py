@@ -18,7 +18,7 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Routing:
-    """The grid's reachability and the A* that flies the plume finder's, cast, check and probe legs and
+    """The grid's reachability and the A* that flies the plume finder's, check and probe legs and
     stands in for a planner that finds no path."""
 
     grid: Grid

@@ -27,7 +27,7 @@ FIND, TRACE, LOST, DECLARED = MissionState.FIND, MissionState.TRACE, MissionStat
 TRANSITIONS: Final[dict[tuple[MissionState, Cue], MissionState]] = {
     (FIND, Cue.ODOUR): TRACE,
     (LOST, Cue.ODOUR): TRACE,
-    (TRACE, Cue.QUIET): LOST,  # a cast around the last detection
+    (TRACE, Cue.QUIET): LOST,  # reported; flown as TRACE, toward the estimate
     (TRACE, Cue.LONE_QUIET): FIND,  # a new leg from where the vehicle is
     (FIND, Cue.CHECK): TRACE,  # the check is flown while tracing, wherever the rule fired
     (LOST, Cue.CHECK): TRACE,

@@ -1,7 +1,7 @@
 """Planners, plume finding and source declaration; ``make_planner`` picks one by ``planning.method``.
 
 Every registered name is a ``PlanningMethod`` value of the configuration, and every planner
-implements ``base.Planner``: ``plan(PlanContext) -> Plan``. Plume finding (``prospect``, ``cast``)
+implements ``base.Planner``: ``plan(PlanContext) -> Plan``. Plume finding (``prospect``)
 and declaration (``declaration``) are used by the mission whatever the planner.
 """
 

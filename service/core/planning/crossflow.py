@@ -1,4 +1,4 @@
-"""Coordinates along and across the flow, used by the cast, the plume finder and the declaration's check.
+"""Coordinates along and across the flow, used by the plume finder and the declaration's check.
 
 ``along`` grows in the direction the flow moves toward (downflow); ``cross`` grows to the left
 of it. Turning patterns are laid out in these coordinates and clipped to the hull of the cell
@@ -106,3 +106,22 @@ def cross_section(grid: Grid, frame: FlowFrame, along: float) -> tuple[float, fl
     if lo > hi + 1e-9:
         return None
     return lo, max(lo, hi)
+
+
+def pass_across(grid: Grid, x: float, y: float, frame: FlowFrame, width_m: float) -> tuple[Waypoint, ...]:
+    """The ends of a pass across the flow through (x, y), ``width_m`` to the left of the flow and
+    then to the right, each clipped to the centre hull (an end clipped onto the other is dropped)."""
+    if not (math.isfinite(width_m) and width_m > 0.0):
+        raise ValueError(f"pass width must be positive, got {width_m}")
+    lo, hi = along_range(grid, frame)
+    a = min(max(frame.along(x, y), lo), hi)
+    span = cross_section(grid, frame, a)
+    if span is None:  # cannot happen for an along inside the range; kept for rounding
+        return ()
+    centre = frame.cross(x, y)
+    ends: list[Waypoint] = []
+    for side in (1.0, -1.0):
+        point = frame.point(a, min(max(centre + side * width_m, span[0]), span[1]))
+        if point not in ends:
+            ends.append(point)
+    return tuple(ends)

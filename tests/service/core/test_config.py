@@ -43,6 +43,8 @@ def test_unknown_key_is_named(tmp_path: Path) -> None:
         ("declaration", "steady_hit_rate"),
         ("planning", "flat_map_ratio"),
         ("planning", "lost_trace_mass"),
+        ("planning", "cast_legs"),
+        ("planning", "cast_width_m"),
     ],
 )
 def test_a_removed_key_says_what_to_do(tmp_path: Path, section: str, key: str) -> None:

@@ -176,7 +176,7 @@ class Vehicle:
 @pytest.mark.parametrize("method", sorted(PLANNERS))
 def test_no_unsafe_waypoint_on_random_maps(method: str) -> None:
     rng = np.random.default_rng(sum(map(ord, method)))
-    planning = PlanningConfig(method=PlanningMethod(method), mldp_steps=4, lost_after_s=3.0, cast_legs=2)
+    planning = PlanningConfig(method=PlanningMethod(method), mldp_steps=4, lost_after_s=3.0)
     emitted = started_inside = 0
     states: set[MissionState] = set()
     for trial in range(80):
@@ -269,7 +269,7 @@ SOURCE = AREA.cell_of(22.0, 3.0)
 
 
 def mission_with(mapper: SourceMapper, **declaration: object) -> Mission:
-    planning = PAPERS_PLANNING.model_copy(update={"lost_after_s": 10.0, "cast_width_m": 10.0, "cast_legs": 2})
+    planning = PAPERS_PLANNING.model_copy(update={"lost_after_s": 10.0})
     decl = PAPERS_DECLARATION.model_copy(update=declaration)
     return Mission(AREA, mapper, planning, decl)
 
@@ -304,14 +304,12 @@ def test_find_trace_lose_recover_declare() -> None:
     assert events == (PlumeFound(5.0, 90.0, -40.0, first=True),)
     assert wps is not None
     assert (wps[-1].x, wps[-1].y) == AREA.centre(SOURCE)
-    # no detection for lost_after_s: LOST, and a cast across the flow at the last detection
+    # no detection for lost_after_s: LOST, reported; the vehicle flies on toward the estimate
     assert tick(14.0)[0] is MissionState.TRACE
     state, events, wps = tick(15.0)
     assert state is MissionState.LOST
     assert events == (PlumeLost(15.0, 90.0, -40.0, last_detection_s=5.0),)
-    assert wps is not None
-    # the first cast leg: 10 m across the flow (North), flown straight to that turning point
-    assert wps == (Waypoint(90.0, -30.0),)
+    assert wps is None or (wps[-1].x, wps[-1].y) == AREA.centre(SOURCE)
     # a detection ends LOST
     state, events, _ = tick(20.0, detected=True)
     assert state is MissionState.TRACE
@@ -455,18 +453,21 @@ def test_find_chooses_a_new_leg_when_the_mean_flow_turns() -> None:
     assert len(chosen) == 1
 
 
-def test_a_lost_plume_is_cast_for_across_the_flow_through_the_last_detection() -> None:
+def test_a_lost_plume_is_traced_on_toward_the_estimate() -> None:
     mapper = ScriptedMapper(AREA)
     mapper.peak_at(SOURCE, 0.3)  # however much of the map the estimate holds
-    planning = PAPERS_PLANNING.model_copy(update={"lost_after_s": 10.0, "cast_width_m": 10.0, "cast_legs": 2})
+    planning = PAPERS_PLANNING.model_copy(update={"lost_after_s": 10.0})
     mission = Mission(AREA, mapper, planning, NEVER)
     v = VehicleState(90.0, -40.0)
     mission.step(Observation(4.0, v.x, v.y, 1.0, 0.0, False), v)  # a tick of flow
     assert mission.step(Observation(5.0, v.x, v.y, 1.0, 0.0, True), v).waypoints is not None
     assert mission.step(Observation(14.0, v.x, v.y, 1.0, 0.0, False), v).state is MissionState.TRACE
+    elsewhere = AREA.cell_of(62.0, 23.0)
+    mapper.peak_at(elsewhere, 0.3)  # the misses moved the estimate
     out = mission.step(Observation(15.0, v.x, v.y, 1.0, 0.0, False), v)
     assert out.state is MissionState.LOST
-    assert out.waypoints == (Waypoint(90.0, -30.0),)
+    assert out.waypoints is not None
+    assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(elsewhere)
 
 
 @pytest.mark.parametrize(
@@ -479,8 +480,6 @@ def test_a_lone_detection_in_find_goes_back_to_find(
     mapper.peak_at(SOURCE, 0.05)
     planning = PlanningConfig(
         lost_after_s=10.0,
-        cast_width_m=10.0,
-        cast_legs=2,
         lone_contact_hits=lone_contact_hits,
         lone_contact_lost_after_s=4.0,
     )
@@ -508,9 +507,9 @@ def test_a_lone_detection_in_find_goes_back_to_find(
         out = mission.step(Observation(30.0, v.x, v.y, *flow, True), v)
         assert out.state is MissionState.TRACE
         assert out.events == (PlumeFound(30.0, v.x, v.y, first=False),)
-    else:  # a cast across the flow through the last detection
+    else:  # lost, and flying on toward the estimate
         assert out.state is MissionState.LOST
-        assert out.waypoints == (Waypoint(90.0, -10.0),)
+        assert out.waypoints is None or (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(SOURCE)
 
 
 def test_probes_beyond_an_obstacle_that_blocks_every_upflow_neighbour() -> None:
@@ -540,23 +539,27 @@ def test_probes_beyond_an_obstacle_that_blocks_every_upflow_neighbour() -> None:
     assert beyond in visited
 
 
-def test_a_cast_turning_point_in_a_blocked_cell_does_not_stall_the_cast() -> None:
-    # the wang scenarios' obstacle ends at x = 56.25, a cell centre: a turning point just past it
-    # lies in a blocked cell; the cast goes on to the stand-in cell instead of holding
+def test_a_lost_vehicle_beside_an_obstacle_flies_on_to_the_estimate() -> None:
+    # the wang scenarios' obstacle ends at x = 56.25, a cell centre; the vehicle loses the plume
+    # just past it and flies round it toward the estimate instead of holding
     grid = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25, obstacles=((36.25, 0.25, 56.25, 7.75),))
     mapper = ScriptedMapper(grid)
-    mapper.peak_at(grid.cell_of(90.0, 40.0))
-    planning = PAPERS_PLANNING.model_copy(update={"lost_after_s": 2.0, "cast_width_m": 10.0, "cast_legs": 4})
+    goal = grid.cell_of(20.0, 4.0)
+    mapper.peak_at(goal)
+    planning = PAPERS_PLANNING.model_copy(update={"lost_after_s": 2.0})
     mission = Mission(grid, mapper, planning, NEVER)
     vehicle = Vehicle(56.4, 10.5)
-    positions = []
-    for t in range(40):
+    states = set()
+    for t in range(60):
         out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, t == 0), vehicle.state)
+        states.add(mission.state)
+        if out.waypoints is not None:
+            for w in out.waypoints:
+                assert_safe_waypoint(grid, w)
         vehicle.follow(out.waypoints)
         vehicle.move()
-        positions.append((round(vehicle.x, 3), round(vehicle.y, 3)))
-    assert mission.state in (MissionState.LOST, MissionState.TRACE)
-    assert len(set(positions[-10:])) > 1  # still moving
+    assert MissionState.LOST in states
+    assert math.dist((vehicle.x, vehicle.y), grid.centre(goal)) < 3.0
 
 
 def start_check() -> tuple[ScriptedMapper, Mission, Vehicle, MissionOutput]:

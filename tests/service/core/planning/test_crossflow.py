@@ -1,5 +1,8 @@
+import pytest
+
 from service.core.grid import Grid
-from service.core.planning.crossflow import FlowFrame, upflow_until
+from service.core.planning.base import Waypoint
+from service.core.planning.crossflow import FlowFrame, pass_across, upflow_until
 
 GRID = Grid(0.0, 20.0, 0.0, 10.0, columns=10, rows=5)  # 2 x 2 m cells: half-cell steps of 1 m
 EAST = FlowFrame(1.0, 0.0)  # upflow is toward -x
@@ -19,3 +22,16 @@ def test_the_walk_returns_the_first_point_upflow_where_done_holds() -> None:
 def test_the_walk_gives_up_where_the_line_leaves_the_area() -> None:
     assert upflow_until(GRID, 3.0, 5.0, EAST, 0.0, lambda x, y: False) is None
     assert upflow_until(GRID, 3.0, 5.0, EAST, 5.0, lambda x, y: True) is None
+
+
+def test_a_pass_across_the_flow_goes_left_then_right_of_it() -> None:
+    # flow East: left of it is North (+y); the cell centres span y 1..9
+    assert pass_across(GRID, 9.0, 5.0, EAST, 3.0) == (Waypoint(9.0, 8.0), Waypoint(9.0, 2.0))
+
+
+def test_a_pass_across_the_flow_is_clipped_to_the_cell_centres() -> None:
+    assert pass_across(GRID, 9.0, 7.0, EAST, 3.0) == (Waypoint(9.0, 9.0), Waypoint(9.0, 4.0))
+    north = FlowFrame(0.0, 1.0)  # left of it is West (-x); the centres span x 1..19
+    assert pass_across(GRID, 1.0, 5.0, north, 3.0) == (Waypoint(1.0, 5.0), Waypoint(4.0, 5.0))
+    with pytest.raises(ValueError, match="positive"):
+        pass_across(GRID, 9.0, 5.0, EAST, 0.0)
