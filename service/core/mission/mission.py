@@ -1,7 +1,7 @@
 """The mission state machine: find the plume, trace it, recover it, declare the source.
 
 Seed pomdp-astar §II-A: a search "can be divided into three phases, namely plume finding, plume
-tracing, and source declaration". The states, each flown by its own behaviour:
+tracing, and source declaration". The states, and the behaviour that flies each:
 
 - ``FIND`` (published as ``search``): no detection yet; straight legs, each the one the map
   expects odour on most often per metre (``Prospect``).
