@@ -40,7 +40,8 @@ from service.core.mapping.belief import FloatArray
 from service.core.mapping.mapper import Estimate, SourceMapper, estimate_of
 from service.core.mission import Mission, MissionEvent, MissionState, SourceDeclared
 from service.core.observation import Observation
-from service.core.planning.base import VehicleState
+from service.core.planning.base import VehicleState, Waypoint
+from service.core.planning.lead import Lead
 from service.core.samples import ChemSample, DetectionSample, FlowSample, Position
 from service.core.tick import TickAggregator
 
@@ -121,6 +122,9 @@ class Search:
             config.sensor.threshold, max_position_age_s=2.0 * config.mapping.tick_s
         )
         self._gaps: tuple[str, ...] = ()
+        self._lead = Lead(self.model_grid)
+        self._plan: tuple[Waypoint, ...] = ()
+        self._hold = False
         self._last_position: Position | None = None
         self._heading_rad = 0.0
         self._declared: Declaration | None = None
@@ -180,7 +184,11 @@ class Search:
             return None
         if vehicle is None:
             vehicle = (obs.x, obs.y, self._heading_rad)
-        out = self._mission.step(obs, VehicleState(*vehicle))
+        x, y = self._lead.planning_point(obs.time_s, vehicle[0], vehicle[1], self._plan)
+        out = self._mission.step(obs, VehicleState(x, y, vehicle[2]))
+        if out.waypoints is not None:
+            self._plan = out.waypoints
+        self._hold = out.hold
         events = tuple(self._on_grid(event) for event in out.events)
         for event in events:
             if isinstance(event, SourceDeclared) and self._declared is None:
@@ -196,6 +204,25 @@ class Search:
             events=events,
             observation=obs,
         )
+
+    def setpoint(self, t_s: float, position: tuple[float, float] | None = None) -> tuple[float, float] | None:
+        """The guided target to command at ``t_s`` for the vehicle at ``position`` (default: the last
+        position given): the current plan's first waypoint, or for an autopilot that stops short of
+        its targets a point far enough ahead along the plan (``planning.lead``). None while there
+        is no plan (nothing to command). Call it at the setpoint rate: it also watches the vehicle
+        for stops short of its target."""
+        if position is None:
+            last = self._last_position
+            if last is None:
+                return None
+            position = (last.x, last.y)
+        target = self._lead.setpoint(t_s, *position, self._plan, hold=self._hold)
+        return None if target is None else (target.x, target.y)
+
+    @property
+    def arrival_radius_m(self) -> float:
+        """How far short of its targets the autopilot has been seen to stop (0 until it has)."""
+        return self._lead.radius_m
 
     def update_map(self, observation: Observation) -> None:
         """Fuse an already aggregated tick into the maps only, without the mission (replay: a

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -40,6 +41,17 @@ def _at_least(minimum: int) -> Callable[[str], int]:
 
     parse.__name__ = "integer"  # argparse names the type in "invalid integer value"
     return parse
+
+
+def _non_negative(text: str) -> float:
+    """An argparse type: a finite number >= 0 (metres)."""
+    value = float(text)
+    if not (math.isfinite(value) and value >= 0.0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
+    return value
+
+
+_non_negative.__name__ = "number"
 
 
 def _add_overrides(parser: argparse.ArgumentParser, metavar: str, text: str, dest: str = "set") -> None:
@@ -323,6 +335,14 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="a bound, not a result: declarations away from the true source are ignored (a perfect guard); "
         "with --set declaration.* it measures what each guard against wrong declarations costs per class",
+    )
+    w.add_argument(
+        "--arrival-radius",
+        type=_non_negative,
+        default=0.0,
+        metavar="M",
+        help="every simulated vehicle stops M m short of its targets, as ArduPilot Rover does within "
+        "WP_RADIUS (2 m by default); default 0: they drive onto them",
     )
 
     r = kinds.add_parser(

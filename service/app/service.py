@@ -158,6 +158,7 @@ class Service:
         self._silent: dict[str, int] = {}
         self._gate_state = GateState(False, "starting")
         self._link_was_alive = False
+        self._radius_told = 0.0
         self._signing_key = (
             load_signing_key(config.mavlink.signing_key_file) if config.mavlink.signing_key_file else None
         )
@@ -408,9 +409,12 @@ class Service:
 
     def _command(self, edges: Edges, now: float) -> bool:
         """Send the current target if allowed and safe; True when a setpoint went out."""
-        target, system = self.target, self.gate.system
-        if target is None or system is None or not self._gate_state.allowed:
+        system = self.gate.system
+        if self.target is None or system is None or not self._gate_state.allowed:
             return False
+        # the plan's first waypoint, or a point ahead of an autopilot that stops short of it
+        point = self.search.setpoint(now)
+        target = self.target if point is None else Waypoint(*point)
         # the mission plans on the model grid and its safety rule used that grid's obstacle cells:
         # an area cell that an obstacle covers only in part is partly free there (every obstacle
         # rectangle is refused on either grid)
@@ -425,7 +429,18 @@ class Service:
         )
         self.stats.setpoints += 1
         edges.recorder.write_setpoint(now, target.x, target.y, cfg.altitude_m)
+        self._tell_radius(edges, now)
         return True
+
+    def _tell_radius(self, edges: Edges, now: float) -> None:
+        """Say once (and again if it grows) that the autopilot stops short of its targets."""
+        radius = self.search.arrival_radius_m
+        if radius <= self._radius_told + 0.1:
+            return
+        self._radius_told = radius
+        text = f"autopilot stops {radius:.1f} m short of its targets (WP_RADIUS?): setpoints now lead it"
+        log.warning("%s", text)
+        edges.recorder.write_event(now, "arrival_radius", text, radius_m=radius)
 
 
 class _Stop(Exception):  # noqa: N818 - a signal inside run_with, never seen outside

@@ -22,6 +22,11 @@ class Emitter:
     emitted: tuple[Waypoint, ...] | None = None
     hold: Waypoint | None = None
 
+    @property
+    def holding(self) -> bool:
+        """Whether the waypoints returned last are a point to stop on."""
+        return self.hold is not None
+
     def emit(self, vehicle: VehicleState, wanted: tuple[Waypoint, ...]) -> tuple[Waypoint, ...] | None:
         """Apply the safety rule; hold on a fixed point while nothing safe is planned; None when the
         result equals the waypoints returned last."""

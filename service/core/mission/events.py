@@ -75,3 +75,5 @@ class MissionOutput:
     waypoints: tuple[Waypoint, ...] | None
     events: tuple[MissionEvent, ...]
     estimate: Estimate
+    hold: bool = False
+    """The waypoints are a point to stop on (declared, or nothing safe to fly), not a path to fly."""

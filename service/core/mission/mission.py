@@ -137,7 +137,8 @@ class Mission:
         """Fuse this tick's observation, move the state machine on, and plan."""
         if self._last_time is not None and obs.time_s <= self._last_time:
             # a repeated or out-of-order tick changes nothing (the mapper would ignore it too)
-            return MissionOutput(obs.time_s, self._state, None, (), self.mapper.estimate())
+            held = self._emitter.holding
+            return MissionOutput(obs.time_s, self._state, None, (), self.mapper.estimate(), held)
         self._last_time = obs.time_s
         self.mapper.update(obs)
         self._update_mean_flow(obs)
@@ -154,7 +155,8 @@ class Mission:
                 mapper=self.mapper,
             )
             waypoints = self._emitter.emit(vehicle, self._BEHAVIOUR[self._state](self, ctx))
-        return MissionOutput(obs.time_s, self._state, waypoints, tuple(events), estimate)
+        held = self._emitter.holding
+        return MissionOutput(obs.time_s, self._state, waypoints, tuple(events), estimate, held)
 
     def _update_mean_flow(self, obs: Observation) -> None:
         """The direction (``_frame``) of the mean flow over the mapper's flow history (this tick's

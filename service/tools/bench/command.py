@@ -207,7 +207,7 @@ def _run_suite(args: argparse.Namespace) -> int:
             suite.run_suite(
                 files, args.runs, first_seed=args.first_seed, config_path=args.config,
                 overrides=args.overrides, jobs=args.jobs, scheduler=args.scheduler, progress=progress,
-                oracle=args.oracle_declaration,
+                oracle=args.oracle_declaration, arrival_radius_m=args.arrival_radius,
             )
         ):  # fmt: skip
             if args.json:

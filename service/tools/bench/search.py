@@ -197,6 +197,7 @@ def run_mission(
     search = Search(config, admit=at_source if oracle else None)
     steps_per_tick = max(1, round(config.mapping.tick_s / world.dt_s))
     sample_every = max(1, round(1.0 / (config.mavlink.stream_hz * world.dt_s)))
+    command_every = max(1, round(1.0 / (config.mavlink.setpoint_rate_hz * world.dt_s)))
     world.driving = True
 
     path_m = 0.0
@@ -217,13 +218,15 @@ def run_mission(
                 search.add_position(t, world.vehicle.x_m, world.vehicle.y_m)
                 search.add_flow(t, flow_x, flow_y)
                 search.add_chemical(t, world.chem_reading())
+            if step_count % command_every == 0:
+                # the service re-sends its target at the setpoint rate, from the latest position
+                world.target_m = search.setpoint(world.time_s, (world.vehicle.x_m, world.vehicle.y_m))
         v = world.vehicle
         # the planner starts from where the simulated vehicle is now, as the service's does
         step = search.tick(world.time_s, vehicle=(v.x_m, v.y_m, v.heading_rad))
         if step is None:  # cannot happen with every stream sampled; kept for a sampling rate < 1/tick
             continue
-        if step.waypoints is not None:
-            world.target_m = step.waypoints[0] if step.waypoints else None
+        world.target_m = search.setpoint(world.time_s, (v.x_m, v.y_m))
         if on_tick is not None:
             on_tick(search, step)
         if step.detected and first_detection is None:

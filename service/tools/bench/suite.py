@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -58,6 +58,9 @@ class SuiteMission:
     overrides: tuple[str, ...] = ()
     oracle: bool = False
     """The perfect declaration guard of ``run_mission``: a bound, not a result."""
+    arrival_radius_m: float = 0.0
+    """The simulated vehicle stops this far short of its targets (ArduPilot Rover's WP_RADIUS);
+    0: it drives onto them, as every class draws it."""
 
 
 @lru_cache(maxsize=64)
@@ -74,7 +77,13 @@ def service_config(path: str | None, overrides: tuple[str, ...]) -> Config:
 def drawn_world(spec: SuiteMission) -> DrawnWorld:
     """One suite mission's world and time limit (its class and configuration read once per process)."""
     config = service_config(spec.config_path, spec.overrides)
-    return draw_scenario(_world_class(spec.class_path), spec.seed, config)
+    drawn = draw_scenario(_world_class(spec.class_path), spec.seed, config)
+    if spec.arrival_radius_m <= 0.0:
+        return drawn
+    world = drawn.scenario.world
+    vehicle = world.vehicle.model_copy(update={"arrival_radius_m": spec.arrival_radius_m})
+    scenario = replace(drawn.scenario, world=world.model_copy(update={"vehicle": vehicle}))
+    return replace(drawn, scenario=scenario)
 
 
 def run_suite_mission(spec: SuiteMission) -> tuple[MissionResult, float]:
@@ -283,13 +292,15 @@ def run_suite(
     scheduler: Any = None,
     progress: Progress = lambda _: None,
     oracle: bool = False,
+    arrival_radius_m: float = 0.0,
 ) -> Iterator[ClassSummary]:
     """Every class over seeds first_seed..first_seed+runs-1; yields each class's summary in order.
 
     ``scheduler``: a Dask scheduler address (or a ``distributed.Client``) to run the missions on;
     None runs them in ``jobs`` local processes (default: the cores). ``oracle``: every mission with
-    the perfect declaration guard (``run_mission``), a bound on what the guards cost."""
-    batches = class_missions(class_files, runs, first_seed, config_path, overrides, oracle)
+    the perfect declaration guard (``run_mission``), a bound on what the guards cost.
+    ``arrival_radius_m``: every vehicle stops this far short of its targets."""
+    batches = class_missions(class_files, runs, first_seed, config_path, overrides, oracle, arrival_radius_m)
     specs = [spec for _, batch in batches for spec in batch]
     if scheduler is not None:
         outcomes = _dask(specs, scheduler, progress)
@@ -306,6 +317,7 @@ def class_missions(
     config_path: str | None,
     overrides: Sequence[str],
     oracle: bool = False,
+    arrival_radius_m: float = 0.0,
 ) -> list[tuple[str, list[SuiteMission]]]:
     """Each class's name and its missions over seeds first_seed..first_seed+runs-1. A broken
     configuration, or a class that cannot draw its first world with it, fails here, once."""
@@ -317,9 +329,11 @@ def class_missions(
         draw_scenario(c, first_seed, config)
     seeds = range(first_seed, first_seed + runs)
     keys = tuple(overrides)
-    return [
-        (c.name, [SuiteMission(c.origin, seed, config_path, keys, oracle) for seed in seeds]) for c in classes
-    ]
+
+    def mission(c: WorldClass, seed: int) -> SuiteMission:
+        return SuiteMission(c.origin, seed, config_path, keys, oracle, arrival_radius_m)
+
+    return [(c.name, [mission(c, seed) for seed in seeds]) for c in classes]
 
 
 def suite_classes(directory: str | Path | None = None) -> list[Path]:

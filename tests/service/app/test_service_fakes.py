@@ -268,3 +268,24 @@ def test_a_target_beside_an_obstacle_goes_out_where_the_mission_planned_it() -> 
     assert service.stats.unsafe_targets == 1
     assert service.target is None
     assert len(recorder.setpoints) == 1
+
+
+def test_an_autopilot_that_stops_short_is_led_and_told_of_once() -> None:
+    # Rover holds 2 m short of a guided target (WP_RADIUS): once the search has seen it stop short,
+    # the setpoints sent lead the vehicle through its targets; the log and the recording say so once
+    config = Config()
+    link, _, recorder, edges = fakes()
+    service = Service(config, clock=Clock(SPEED))
+    service.gate.heard(Heartbeat(0.0, 1, 1, 10, 3, config.mavlink.guided_mode, armed=True))
+    service._update_gate(edges, 0.5)
+    search = service.search
+    search._plan = (Waypoint(52.0, 0.0),)  # the mission's plan: one point 2 m east of the vehicle
+    service.target = Waypoint(52.0, 0.0)
+    for k in range(10):  # the vehicle stays put at (50, 0) for 4.5 s while commanded
+        search.add_position(0.5 * k, 50.0, 0.0)
+        assert service._command(edges, 0.5 * k)
+    assert search.arrival_radius_m == pytest.approx(2.0)
+    sent = [(x, y) for _, _, x, y, _, _ in link.of("setpoint")]
+    assert sent[0] == (52.0, 0.0)
+    assert sent[-1] == (pytest.approx(52.0 + 2.0 + 0.3), 0.0)  # through the target, to stop just past it
+    assert recorder.events.count("arrival_radius") == 1

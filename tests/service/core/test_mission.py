@@ -282,8 +282,11 @@ def test_find_trace_lose_recover_declare() -> None:
     v = VehicleState(90.0, -40.0)
     flow = (1.0, 0.0)
 
+    holds: list[bool] = []
+
     def tick(t: float, detected: bool = False) -> tuple:  # type: ignore[type-arg]
         out = mission.step(Observation(t, v.x, v.y, *flow, detected), v)
+        holds.append(out.hold)
         return out.state, out.events, out.waypoints
 
     # FIND: no flow history at the first tick, so hold; then a leg chosen by the map
@@ -291,9 +294,11 @@ def test_find_trace_lose_recover_declare() -> None:
     assert state is MissionState.FIND
     assert events == ()
     assert wps == (Waypoint(v.x, v.y),)
+    assert holds[-1]  # a point to stop on, not a path (an autopilot's setpoint need not lead)
     state, events, wps = tick(1.0)
     assert state is MissionState.FIND
     assert wps is not None
+    assert not holds[-1]
     # a leg clear of obstacles is flown straight to its end, not along A*'s cells
     (end,) = wps
     assert math.dist((end.x, end.y), (v.x, v.y)) >= 5.0
@@ -330,9 +335,11 @@ def test_find_trace_lose_recover_declare() -> None:
     # radius 5 m on 5 m cells: the cell and its four side neighbours, (1 - 0.9) / 399 each
     assert declared.mass == pytest.approx(0.9 + 4 * 0.1 / 399)
     assert wps == (Waypoint(v.x, v.y),)  # hold where it is
+    assert holds[-1]
     # declared is final: no more waypoints or events, the map keeps updating
     state, events, wps = tick(36.0, detected=True)
     assert (state, events, wps) == (MissionState.DECLARED, (), None)
+    assert holds[-1]
 
 
 def test_mass_rule_declares_and_says_so() -> None:

@@ -149,3 +149,14 @@ def test_calibration_counts_the_statements_that_came_true() -> None:
     both = calibration + calibration
     assert (both.high, both.high_within) == (6, 2)
     assert "3 declarations stated at >= 95%: 33.3% had the source within" in calibration.line()
+
+
+def test_an_arrival_radius_makes_every_vehicle_stop_short_and_changes_nothing_else() -> None:
+    steady = str(suite.suite_classes()[0])
+    plain = suite.drawn_world(suite.SuiteMission(steady, 3))
+    short = suite.drawn_world(suite.SuiteMission(steady, 3, arrival_radius_m=2.0))
+    assert plain.scenario.world.vehicle.arrival_radius_m == 0.0
+    assert short.scenario.world.vehicle.arrival_radius_m == 2.0
+    world, vehicle = short.scenario.world, plain.scenario.world.vehicle
+    assert world.model_copy(update={"vehicle": vehicle}) == plain.scenario.world
+    assert (short.scenario.config, short.time_limit_s) == (plain.scenario.config, plain.time_limit_s)

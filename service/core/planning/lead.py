@@ -1,0 +1,185 @@
+"""Guided setpoints for an autopilot that stops short of its targets.
+
+ArduPilot Rover counts a guided target as reached once it is within ``WP_RADIUS`` (2 m by default)
+and holds still there. The mission steers from cell to cell (1.25 m apart on the default area), so
+with such an autopilot the next target is often inside the radius already and the vehicle never
+moves again. ``Lead`` learns the radius from the vehicle's own behaviour, with no setting: a
+vehicle that stays put for ``STALL_S`` while its target is ``STALL_MIN_M`` to ``MAX_RADIUS_M``
+away has an acceptance radius at least that large. Once the radius r is known, each setpoint is
+the first point of the plan ``r + LEAD_MARGIN_M`` away (pure pursuit); a point of the plan nearer
+than that (its end, or a corner round an obstacle) is overrun by ``r + OVERRUN_M`` along the line
+of sight, so that the vehicle drives through it and stops just past it, not r short of it.
+While r is 0 (a vehicle that drives onto its targets, as the simulator's and ArduCopter's do) the
+setpoint is the plan's first waypoint, as it always was.
+
+Every setpoint passes the safety rule (``planning.safety``): inside the area, outside every
+obstacle, with a clear straight leg from the vehicle; a lead point that fails falls back to the
+plan's own first waypoint, which the mission has already made safe.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from service.core.mapping.belief import FloatArray
+from service.core.planning.base import Waypoint
+from service.core.planning.safety import is_safe_point, segment_clear
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from service.core.grid import Grid
+
+STALL_S = 3.0
+"""A vehicle that has not moved for this long with its target unchanged has stopped short of it
+(longer than a pivot turn on the spot: 180 degrees at 90 degrees/s)."""
+STOPPED_M = 0.05
+"""Moves shorter than this do not count as moving."""
+STALL_MIN_M = 0.3
+"""A vehicle stopped nearer its target than this has arrived (GPS noise, rounding)."""
+MAX_RADIUS_M = 5.0
+"""Stalls farther from the target than this are not taken for an acceptance radius (a vehicle held
+by something else: an obstacle, a pilot's brake)."""
+LEAD_MARGIN_M = 1.0
+"""How far beyond the learned radius the setpoint leads the vehicle."""
+OVERRUN_M = 0.3
+"""How far beyond a plan's last point, less the learned radius, the vehicle is sent: it stops this
+far past the point (within the mission's arrival distance, ``pattern.ARRIVAL_M``)."""
+THERE_M = 0.5
+"""A vehicle this near the one point of its plan is on it (the mission's ``pattern.ARRIVAL_M``): it
+is not sent on past it."""
+SAMPLE_M = 0.1
+"""The path is searched for the lead point at this spacing."""
+CALL_GAP_S = 2.0
+"""Setpoints asked for this far apart (commanding was paused) restart the stall watch."""
+
+
+def lead_point(
+    grid: Grid,
+    x: float,
+    y: float,
+    plan: Sequence[Waypoint],
+    lead_m: float,
+    overrun_m: float,
+) -> Waypoint:
+    """The setpoint for a vehicle at (x, y) that stops short of its targets, flying ``plan``
+    (non-empty): the first point of the path through ``plan`` that lies ``lead_m`` from (x, y) as
+    the crow flies; where the straight leg there is not clear (the path turns round an obstacle) or
+    the path ends nearer, the farthest point along the path that is in sight, moved on
+    ``overrun_m`` along the line of sight (by quarters, as far as it stays safe), so that the vehicle
+    drives through that point and stops just past it. (x, y) itself (hold) when no point is in
+    sight."""
+    path = _densified(np.asarray(_up_to_lead([(x, y), *((w.x, w.y) for w in plan)], lead_m), dtype=float))
+    for k in range(len(path) - 1, 0, -1):
+        aim = (float(path[k, 0]), float(path[k, 1]))
+        if is_safe_point(grid, *aim) and segment_clear(grid, (x, y), aim):
+            break
+    else:
+        return Waypoint(x, y)
+    away = math.hypot(aim[0] - x, aim[1] - y)
+    if away >= lead_m - 1e-9 or away <= 1e-6:
+        return Waypoint(*aim)
+    ux, uy = (aim[0] - x) / away, (aim[1] - y) / away
+    for share in (1.0, 0.75, 0.5, 0.25):
+        on = (aim[0] + share * overrun_m * ux, aim[1] + share * overrun_m * uy)
+        if is_safe_point(grid, *on) and segment_clear(grid, (x, y), on):
+            return Waypoint(*on)
+    return Waypoint(*aim)
+
+
+def _up_to_lead(points: list[tuple[float, float]], lead_m: float) -> list[tuple[float, float]]:
+    """The path ``points`` cut at its first point ``lead_m`` from ``points[0]`` (whole if none is)."""
+    x, y = points[0]
+    for k in range(1, len(points)):
+        (ax, ay), (bx, by) = points[k - 1], points[k]
+        if math.hypot(bx - x, by - y) < lead_m:
+            continue
+        # |a - v + s (b - a)| = lead: the root where the path leaves the circle
+        ux, uy, wx, wy = bx - ax, by - ay, ax - x, ay - y
+        uu, wu, ww = ux * ux + uy * uy, wx * ux + wy * uy, wx * wx + wy * wy
+        root = math.sqrt(max(wu * wu - uu * (ww - lead_m * lead_m), 0.0))
+        share = min(max((root - wu) / uu, 0.0), 1.0)
+        return [*points[:k], (ax + share * ux, ay + share * uy)]
+    return points
+
+
+def _densified(points: FloatArray) -> FloatArray:
+    """The polyline through ``points`` sampled every ``SAMPLE_M`` or closer, its vertices kept."""
+    out = [points[:1]]
+    for a, b in itertools.pairwise(points):
+        n = max(1, math.ceil(float(np.hypot(*(b - a))) / SAMPLE_M))
+        share = np.arange(1, n + 1)[:, None] / n
+        out.append(a + share * (b - a))
+    return np.concatenate(out)
+
+
+@dataclass
+class Lead:
+    """The learned acceptance radius (``radius_m``) and the watch for a vehicle stopped short."""
+
+    grid: Grid
+    radius_m: float = 0.0
+    _since: tuple[float, float, float] | None = None  # (t, x, y) of the last move
+    _target: Waypoint | None = None
+    _last_call: float | None = None
+
+    def setpoint(
+        self, t_s: float, x: float, y: float, plan: Sequence[Waypoint], *, hold: bool = False
+    ) -> Waypoint | None:
+        """The target to command now for a vehicle at (x, y) flying ``plan``; a ``hold`` plan's point
+        is commanded as it is (the vehicle is to stop there). None for an empty plan."""
+        if not plan:
+            self._watch(t_s, x, y, None)
+            return None
+        end = plan[-1]
+        there = len(plan) == 1 and math.hypot(end.x - x, end.y - y) <= THERE_M
+        if hold or there or self.radius_m <= 0.0:
+            target = plan[0]
+        else:
+            r = self.radius_m
+            target = lead_point(self.grid, x, y, plan, r + LEAD_MARGIN_M, r + OVERRUN_M)
+        if not hold:
+            self._watch(t_s, x, y, target)
+        else:
+            self._since = None
+        return target
+
+    def planning_point(self, t_s: float, x: float, y: float, plan: Sequence[Waypoint]) -> tuple[float, float]:
+        """Where the mission should plan from at ``t_s``: (x, y), or the plan's end for a vehicle
+        that has stood still for ``STALL_S`` within the radius of it. Where an obstacle or the
+        area's edge lies just beyond the end, no overrun gets such a vehicle any nearer: the end is
+        as near as it will go, and planning on from (x, y) would send it there again."""
+        since = self._since
+        if self.radius_m <= 0.0 or not plan or since is None or t_s - since[0] < STALL_S:
+            return x, y
+        end = plan[-1]
+        still = math.hypot(x - since[1], y - since[2]) <= STOPPED_M
+        if still and math.hypot(end.x - x, end.y - y) <= self.radius_m + OVERRUN_M:
+            return end.x, end.y
+        return x, y
+
+    def _watch(self, t_s: float, x: float, y: float, target: Waypoint | None) -> None:
+        """Learn the radius from a vehicle that stays put short of an unchanged target."""
+        paused = self._last_call is None or t_s - self._last_call > CALL_GAP_S
+        self._last_call = t_s
+        changed = (
+            target is None
+            or self._target is None
+            or math.hypot(target.x - self._target.x, target.y - self._target.y) > STOPPED_M
+        )
+        self._target = target
+        since = self._since
+        if paused or changed or since is None or math.hypot(x - since[1], y - since[2]) > STOPPED_M:
+            self._since = (t_s, x, y)
+            return
+        if target is None or t_s - since[0] < STALL_S:
+            return
+        away = math.hypot(target.x - x, target.y - y)
+        if STALL_MIN_M <= away <= MAX_RADIUS_M and away > self.radius_m:
+            self.radius_m = away
+            self._since = (t_s, x, y)  # led from now on: a stall from here is watched anew
