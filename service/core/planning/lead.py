@@ -38,8 +38,9 @@ if TYPE_CHECKING:
 STALL_S = 3.0
 """A vehicle that has not moved for this long with its target unchanged has stopped short of it
 (longer than a pivot turn on the spot: 180 degrees at 90 degrees/s)."""
-STOPPED_M = 0.05
-"""Moves shorter than this do not count as moving."""
+STOPPED_M = 0.2
+"""A vehicle that stays within this of where it was has not moved (a stopped vehicle's position
+jitters by a few centimetres with GPS; a moving one covers more in a setpoint period)."""
 STALL_MIN_M = 0.3
 """A vehicle stopped nearer its target than this has arrived (GPS noise, rounding)."""
 MAX_RADIUS_M = 5.0

@@ -118,3 +118,11 @@ def test_a_vehicle_held_short_of_its_plan_s_end_is_planned_on_from_the_end() -> 
         lead.setpoint(100.0 + 0.5 * k, 5.0, 17.6, plan)
     assert lead.planning_point(103.5, 5.0, 17.6, plan) == (5.0, 19.5)
     assert lead.radius_m == 2.0
+
+
+def test_a_stopped_vehicle_is_seen_stopped_through_position_jitter() -> None:
+    lead = Lead(GRID)
+    plan = (Waypoint(7.0, 5.0),)
+    for k, jitter in enumerate([0.0, 0.08, -0.06, 0.1, -0.09, 0.04, -0.1, 0.07]):  # 3.5 s, +-10 cm
+        lead.setpoint(100.0 + 0.5 * k, 5.0 + jitter, 5.0 - jitter, plan)
+    assert lead.radius_m == pytest.approx(2.0, abs=0.15)
