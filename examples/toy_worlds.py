@@ -32,7 +32,6 @@ def toy_mission(seed: int, overrides: list[str]) -> tuple[float | None, bool]:
     ux, uy = math.cos(heading), math.sin(heading)
     x, y = rng.uniform(grid.x_min + 5, grid.x_max - 5), rng.uniform(grid.y_min + 5, grid.y_max - 5)
     presence, widening = rng.uniform(0.4, 0.9), rng.uniform(0.15, 0.45)
-    target = None
     for t in range(600):
         along = (x - sx) * ux + (y - sy) * uy
         across = -(x - sx) * uy + (y - sy) * ux
@@ -47,8 +46,7 @@ def toy_mission(seed: int, overrides: list[str]) -> tuple[float | None, bool]:
         if step.declared:
             d = step.declared
             return float(t), math.hypot(d.x - sx, d.y - sy) <= d.radius_m
-        if step.waypoints is not None:
-            target = step.waypoints[0] if step.waypoints else None
+        target = search.setpoint(t)
         if target is not None:
             gx, gy = target[0] - x, target[1] - y
             scale = min(1.0, 1.0 / max(math.hypot(gx, gy), 1e-9))
