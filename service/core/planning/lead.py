@@ -35,9 +35,9 @@ if TYPE_CHECKING:
 
     from service.core.grid import Grid
 
-STALL_S = 3.0
+STALL_S = 5.0
 """A vehicle that has not moved for this long with its target unchanged has stopped short of it
-(longer than a pivot turn on the spot: 180 degrees at 90 degrees/s)."""
+(longer than a pivot turn on the spot: Rover turns 180 degrees in 3 s at WP_PIVOT_RATE 60 deg/s)."""
 STOPPED_M = 0.2
 """A vehicle that stays within this of where it was has not moved (a stopped vehicle's position
 jitters by a few centimetres with GPS; a moving one covers more in a setpoint period)."""

@@ -18,6 +18,7 @@ from service.core.config import Config, build_config
 from service.core.errors import LinkError
 from service.core.observation import Observation
 from service.core.planning.base import Waypoint
+from service.core.planning.lead import STALL_S
 from service.edges.foxglove_scene import VEHICLE_TOPIC
 from service.edges.mavlink_link import LinkCounters
 from service.edges.signing import SigningCounters
@@ -281,7 +282,7 @@ def test_an_autopilot_that_stops_short_is_led_and_told_of_once() -> None:
     search = service.search
     search._plan = (Waypoint(52.0, 0.0),)  # the mission's plan: one point 2 m east of the vehicle
     service.target = Waypoint(52.0, 0.0)
-    for k in range(10):  # the vehicle stays put at (50, 0) for 4.5 s while commanded
+    for k in range(int(2 * STALL_S) + 4):  # the vehicle stays put at (50, 0) while commanded
         search.add_position(0.5 * k, 50.0, 0.0)
         assert service._command(edges, 0.5 * k)
     assert search.arrival_radius_m == pytest.approx(2.0)

@@ -74,7 +74,7 @@ def test_a_vehicle_stopped_short_teaches_the_radius_and_is_then_led() -> None:
     plan = (Waypoint(7.0, 5.0),)
     assert _stand(lead, 5.0, plan, STALL_S - 1.0) == Waypoint(7.0, 5.0)  # a pivot turn is not a stall
     assert lead.radius_m == 0.0
-    _stand(lead, 5.0, plan, 1.5, start=102.5)
+    _stand(lead, 5.0, plan, 1.5, start=100.0 + STALL_S - 0.5)
     assert lead.radius_m == pytest.approx(2.0)
     # then the setpoint is the radius and a margin ahead, and the path's end is overrun by the
     # radius less a little, so that the vehicle stops just past it
@@ -111,18 +111,20 @@ def test_a_vehicle_held_short_of_its_plan_s_end_is_planned_on_from_the_end() -> 
     plan = (Waypoint(5.0, 19.5),)
     assert Lead(GRID).planning_point(0.0, 5.0, 17.6, plan) == (5.0, 17.6)  # no radius learnt
     lead = Lead(GRID, radius_m=2.0)
-    for k in range(5):  # 2 s at 2 Hz
+    calls = int(2 * STALL_S)  # at 2 Hz
+    for k in range(calls - 1):
         assert lead.setpoint(100.0 + 0.5 * k, 5.0, 17.6, plan) == Waypoint(5.0, 19.5)
-    assert lead.planning_point(102.0, 5.0, 17.6, plan) == (5.0, 17.6)  # not still for long enough
-    for k in range(5, 8):
+    assert lead.planning_point(100.0 + STALL_S - 1.0, 5.0, 17.6, plan) == (5.0, 17.6)  # not still long enough
+    for k in range(calls - 1, calls + 2):
         lead.setpoint(100.0 + 0.5 * k, 5.0, 17.6, plan)
-    assert lead.planning_point(103.5, 5.0, 17.6, plan) == (5.0, 19.5)
+    assert lead.planning_point(100.0 + STALL_S + 0.5, 5.0, 17.6, plan) == (5.0, 19.5)
     assert lead.radius_m == 2.0
 
 
 def test_a_stopped_vehicle_is_seen_stopped_through_position_jitter() -> None:
     lead = Lead(GRID)
     plan = (Waypoint(7.0, 5.0),)
-    for k, jitter in enumerate([0.0, 0.08, -0.06, 0.1, -0.09, 0.04, -0.1, 0.07]):  # 3.5 s, +-10 cm
-        lead.setpoint(100.0 + 0.5 * k, 5.0 + jitter, 5.0 - jitter, plan)
+    jitter = [0.0, 0.08, -0.06, 0.1, -0.09, 0.04, -0.1, 0.07]  # +-10 cm
+    for k in range(int(2 * STALL_S) + 1):
+        lead.setpoint(100.0 + 0.5 * k, 5.0 + jitter[k % 8], 5.0 - jitter[k % 8], plan)
     assert lead.radius_m == pytest.approx(2.0, abs=0.15)
