@@ -24,11 +24,12 @@ def test_a_path_that_ends_nearer_than_the_lead_is_overrun_along_the_line_of_sigh
     assert lead_point(GRID, 5.0, 5.0, plan, 3.0, 0.0) == Waypoint(6.0, 5.0)
 
 
-def test_the_overrun_stops_inside_the_area() -> None:
-    # 0.8 m left to the eastern edge: of the quarters of 2 m only the last fits
-    assert lead_point(GRID, 17.2, 5.0, (Waypoint(19.2, 5.0),), 9.0, 2.0) == Waypoint(19.7, 5.0)
-    # on the edge nothing fits: the end itself
-    assert lead_point(GRID, 18.0, 5.0, (Waypoint(20.0, 5.0),), 9.0, 2.0) == Waypoint(20.0, 5.0)
+def test_the_overrun_stays_inside_the_area() -> None:
+    # against the eastern edge it turns aside along the edge (30 and 60 degrees end outside)
+    assert lead_point(GRID, 17.2, 5.0, (Waypoint(19.2, 5.0),), 9.0, 2.0) == Waypoint(19.2, 7.0)
+    # into the north-eastern corner nothing turned fits: half of it straight on
+    end = lead_point(GRID, 17.2, 17.2, (Waypoint(19.2, 19.2),), 9.0, 2.0)
+    assert end.x == end.y == pytest.approx(19.2 + math.sqrt(0.5))
 
 
 def test_round_an_obstacle_the_lead_point_is_the_farthest_one_in_sight() -> None:
@@ -106,18 +107,22 @@ def test_stalls_far_from_the_target_or_across_a_pause_teach_nothing() -> None:
 
 
 def test_a_vehicle_held_short_of_its_plan_s_end_is_planned_on_from_the_end() -> None:
-    # the end lies 0.5 m from the area's northern edge: no overrun fits, and a vehicle that stops
-    # 2 m short of its target stands 1.9 m short of it for good
-    plan = (Waypoint(5.0, 19.5),)
-    assert Lead(GRID).planning_point(0.0, 5.0, 17.6, plan) == (5.0, 17.6)  # no radius learnt
+    # the end lies 0.8 m from the north-eastern corner: the only overrun that fits, a quarter
+    # straight on, ends 2 m from where a vehicle that stops 2 m short has stopped, short of the end
+    plan = (Waypoint(19.2, 19.2),)
+    carrot = 19.2 + 0.25 * (2.0 + OVERRUN_M) / math.sqrt(2.0)  # a quarter of the overrun fits
+    x = y = carrot - 2.0 / math.sqrt(2.0)
+    assert Lead(GRID).planning_point(0.0, x, y, plan) == (x, y)  # no radius learnt
     lead = Lead(GRID, radius_m=2.0)
     calls = int(2 * STALL_S)  # at 2 Hz
     for k in range(calls - 1):
-        assert lead.setpoint(100.0 + 0.5 * k, 5.0, 17.6, plan) == Waypoint(5.0, 19.5)
-    assert lead.planning_point(100.0 + STALL_S - 1.0, 5.0, 17.6, plan) == (5.0, 17.6)  # not still long enough
+        target = lead.setpoint(100.0 + 0.5 * k, x, y, plan)
+        assert target is not None
+        assert math.hypot(target.x - x, target.y - y) == pytest.approx(2.0)
+    assert lead.planning_point(100.0 + STALL_S - 1.0, x, y, plan) == (x, y)  # not still for long enough
     for k in range(calls - 1, calls + 2):
-        lead.setpoint(100.0 + 0.5 * k, 5.0, 17.6, plan)
-    assert lead.planning_point(100.0 + STALL_S + 0.5, 5.0, 17.6, plan) == (5.0, 19.5)
+        lead.setpoint(100.0 + 0.5 * k, x, y, plan)
+    assert lead.planning_point(100.0 + STALL_S + 0.5, x, y, plan) == (19.2, 19.2)
     assert lead.radius_m == 2.0
 
 
@@ -128,3 +133,12 @@ def test_a_stopped_vehicle_is_seen_stopped_through_position_jitter() -> None:
     for k in range(int(2 * STALL_S) + 1):
         lead.setpoint(100.0 + 0.5 * k, 5.0 + jitter[k % 8], 5.0 - jitter[k % 8], plan)
     assert lead.radius_m == pytest.approx(2.0, abs=0.15)
+
+
+def test_an_overrun_into_a_wall_is_turned_aside() -> None:
+    # the point (8.5, 7.5) lies 0.5 m from the wall's face x = 9 (the wall spans y 4-8): straight
+    # on, and three quarters of it, end inside; turned 30 degrees (left first) the full overrun
+    # ends above the wall, and the leg to it clears the wall's corner (9, 8)
+    target = lead_point(WALLED, 7.0, 7.5, (Waypoint(8.5, 7.5),), 3.0, 2.0)
+    assert target.x == pytest.approx(8.5 + 2.0 * math.cos(math.radians(30.0)))
+    assert target.y == pytest.approx(7.5 + 2.0 * math.sin(math.radians(30.0)))
