@@ -14,31 +14,30 @@ from sim_bridge.scenarios import load_scenario
 pytestmark = pytest.mark.sim
 
 
-def test_declares_the_wang_laminar_source(tmp_path: Path) -> None:
-    # Seed 12: in process (`oslim bench search`) the mission declares at 161 s, far inside the
-    # 600 s limit; seed 1 took 541 s, and loopback timing under load once tipped it past the limit.
-    scenario = load_scenario("wang-laminar")
+@pytest.mark.parametrize(
+    ("seed", "overrides", "speed"),
+    [
+        # Seed 12: in process (`oslim bench search`) the mission declares at 161 s, far inside the
+        # 600 s limit; seed 1 took 541 s, and loopback timing under load once tipped it past it.
+        (12, [], 10.0),
+        # ArduPilot Rover's default WP_RADIUS: the service learns it from the stub vehicle's stops
+        # and leads its setpoints (seed 0 declares at 163 s; without the lead it stalled at 91 m)
+        (0, ["world.vehicle.arrival_radius_m=2"], 20.0),
+    ],
+    ids=["drives-onto-targets", "stops-2-m-short"],
+)
+def test_declares_the_wang_laminar_source(
+    tmp_path: Path, seed: int, overrides: list[str], speed: float
+) -> None:
+    scenario = load_scenario("wang-laminar", overrides)
     result, stats, perf = asyncio.run(
-        run_mission(scenario, 12, speed=10.0, max_time_s=600.0, recorder_dir=str(tmp_path), probe=False)
+        run_mission(scenario, seed, speed=speed, max_time_s=600.0, recorder_dir=str(tmp_path), probe=False)
     )
     assert result.found, result
     assert result.error_m is not None
     assert result.error_m <= 4.0
     assert stats.unsafe_targets == 0
     assert perf["setpoints"] > 0
-
-
-def test_a_rover_that_stops_two_metres_short_is_led_through_the_mission(tmp_path: Path) -> None:
-    # ArduPilot Rover's default WP_RADIUS: the service learns it from the stub vehicle's stops and
-    # leads its setpoints (seed 0 declares at 206 s; without the lead the vehicle stalled at 91 m)
-    scenario = load_scenario("wang-laminar", ["world.vehicle.arrival_radius_m=2"])
-    result, stats, _ = asyncio.run(
-        run_mission(scenario, 0, speed=20.0, max_time_s=600.0, recorder_dir=str(tmp_path), probe=False)
-    )
-    assert result.found, result
-    assert result.error_m is not None
-    assert result.error_m <= 4.0
-    assert stats.unsafe_targets == 0
 
 
 def test_cli_prints_one_json_line_and_exit_status(tmp_path: Path) -> None:
