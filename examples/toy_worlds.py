@@ -7,6 +7,7 @@ vehicle starts at a random point and flies at most 1 m toward its target each se
 most. Run from the checkout::
 
     python examples/toy_worlds.py [--worlds 90] [--first-seed 0] [--set section.key=value ...]
+                                  [--arrival-radius M]
 
 It prints how many worlds were solved (declared within the stated radius), how many declarations
 were wrong, and the median time of the solved ones.
@@ -22,8 +23,10 @@ import statistics
 from service.api import Search, load_config
 
 
-def toy_mission(seed: int, overrides: list[str]) -> tuple[float | None, bool]:
-    """One world: (time of the declaration or None, whether the source lies within its radius)."""
+def toy_mission(seed: int, overrides: list[str], arrival_radius_m: float = 0.0) -> tuple[float | None, bool]:
+    """One world: (time of the declaration or None, whether the source lies within its radius).
+    ``arrival_radius_m``: the vehicle stops this far short of its target (ArduPilot Rover's
+    WP_RADIUS)."""
     rng = random.Random(seed)
     search = Search(load_config(None, overrides))
     grid = search.grid
@@ -49,7 +52,8 @@ def toy_mission(seed: int, overrides: list[str]) -> tuple[float | None, bool]:
         target = search.setpoint(t)
         if target is not None:
             gx, gy = target[0] - x, target[1] - y
-            scale = min(1.0, 1.0 / max(math.hypot(gx, gy), 1e-9))
+            away = math.hypot(gx, gy)
+            scale = min(1.0, away - arrival_radius_m) / max(away, 1e-9) if away > arrival_radius_m else 0.0
             x, y = x + gx * scale, y + gy * scale
     return None, False
 
@@ -59,8 +63,16 @@ def main() -> None:
     parser.add_argument("--worlds", type=int, default=90)
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
+    parser.add_argument(
+        "--arrival-radius",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="the vehicle stops M m short of its targets (default 0: it drives onto them)",
+    )
     args = parser.parse_args()
-    results = [toy_mission(seed, args.set) for seed in range(args.first_seed, args.first_seed + args.worlds)]
+    seeds = range(args.first_seed, args.first_seed + args.worlds)
+    results = [toy_mission(seed, args.set, args.arrival_radius) for seed in seeds]
     solved = [t for t, right in results if t is not None and right]
     wrong = sum(1 for t, right in results if t is not None and not right)
     median = f"{statistics.median(solved):.0f} s" if solved else "-"
