@@ -164,8 +164,10 @@ class Lead:
         that has stood still for ``STALL_S`` within the radius of it. Where an obstacle or the
         area's edge lies just beyond the end, no overrun gets such a vehicle any nearer: the end is
         as near as it will go, and planning on from (x, y) would send it there again."""
-        since = self._since
+        since, asked = self._since, self._last_call
         if self.radius_m <= 0.0 or not plan or since is None or t_s - since[0] < STALL_S:
+            return x, y
+        if asked is None or t_s - asked > CALL_GAP_S:  # not commanding (pilot, link): not held by us
             return x, y
         end = plan[-1]
         still = math.hypot(x - since[1], y - since[2]) <= STOPPED_M

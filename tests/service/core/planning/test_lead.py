@@ -124,6 +124,8 @@ def test_a_vehicle_held_short_of_its_plan_s_end_is_planned_on_from_the_end() -> 
         lead.setpoint(100.0 + 0.5 * k, x, y, plan)
     assert lead.planning_point(100.0 + STALL_S + 0.5, x, y, plan) == (19.2, 19.2)
     assert lead.radius_m == 2.0
+    # once the service stops commanding (the pilot took over, the link was lost) it is not held
+    assert lead.planning_point(100.0 + STALL_S + 5.0, x, y, plan) == (x, y)
 
 
 def test_a_stopped_vehicle_is_seen_stopped_through_position_jitter() -> None:
