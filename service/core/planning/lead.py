@@ -135,7 +135,7 @@ class Lead:
     grid: Grid
     radius_m: float = 0.0
     _since: tuple[float, float, float] | None = None  # (t, x, y) of the last move
-    _target: Waypoint | None = None
+    _farthest: float = 0.0  # the farthest target since, m
     _last_call: float | None = None
 
     def setpoint(
@@ -176,22 +176,18 @@ class Lead:
         return x, y
 
     def _watch(self, t_s: float, x: float, y: float, target: Waypoint | None) -> None:
-        """Learn the radius from a vehicle that stays put short of an unchanged target."""
+        """Learn the radius from a vehicle that stays put while every target it is sent lies
+        0.3-5 m away: it stops short of them all, so its radius is at least the farthest. (The
+        targets may change meanwhile: the map moves the estimate while the vehicle waits.)"""
         paused = self._last_call is None or t_s - self._last_call > CALL_GAP_S
         self._last_call = t_s
-        changed = (
-            target is None
-            or self._target is None
-            or math.hypot(target.x - self._target.x, target.y - self._target.y) > STOPPED_M
-        )
-        self._target = target
         since = self._since
-        if paused or changed or since is None or math.hypot(x - since[1], y - since[2]) > STOPPED_M:
-            self._since = (t_s, x, y)
+        away = math.inf if target is None else math.hypot(target.x - x, target.y - y)
+        held = STALL_MIN_M <= away <= MAX_RADIUS_M
+        if paused or not held or since is None or math.hypot(x - since[1], y - since[2]) > STOPPED_M:
+            self._since, self._farthest = (t_s, x, y), (away if held else 0.0)
             return
-        if target is None or t_s - since[0] < STALL_S:
-            return
-        away = math.hypot(target.x - x, target.y - y)
-        if STALL_MIN_M <= away <= MAX_RADIUS_M and away > self.radius_m + STOPPED_M:
-            self.radius_m = away
-            self._since = (t_s, x, y)  # led from now on: a stall from here is watched anew
+        self._farthest = max(self._farthest, away)
+        if t_s - since[0] >= STALL_S and self._farthest > self.radius_m + STOPPED_M:
+            self.radius_m = self._farthest
+            self._since, self._farthest = (t_s, x, y), 0.0  # led from now on: watched anew

@@ -144,3 +144,11 @@ def test_an_overrun_into_a_wall_is_turned_aside() -> None:
     target = lead_point(WALLED, 7.0, 7.5, (Waypoint(8.5, 7.5),), 3.0, 2.0)
     assert target.x == pytest.approx(8.5 + 2.0 * math.cos(math.radians(30.0)))
     assert target.y == pytest.approx(7.5 + 2.0 * math.sin(math.radians(30.0)))
+
+
+def test_a_vehicle_held_while_its_targets_change_teaches_the_farthest() -> None:
+    # the map moves the estimate while the vehicle waits: new targets, all inside its radius
+    lead = Lead(GRID)
+    for k in range(int(2 * STALL_S) + 1):
+        lead.setpoint(100.0 + 0.5 * k, 5.0, 5.0, (Waypoint(6.8 if k % 2 else 5.0, 5.0 if k % 2 else 7.0),))
+    assert lead.radius_m == pytest.approx(2.0)
