@@ -176,8 +176,8 @@ def test_a_vehicle_that_stops_short_of_its_targets_still_declares(
     r = run_mission(configured, seed, on_tick=lambda s, step: radii.append(s.arrival_radius_m))
     assert r.declared
     assert r.correct
-    if radius_m >= 1.0:
-        assert radius_m - 0.3 <= radii[-1] <= radius_m
+    if radius_m >= 1.0:  # learnt from its stops: a little short, or long by a pivot inside the watch
+        assert radius_m - 0.3 <= radii[-1] <= radius_m + 0.5
 
 
 def test_command_prints_one_json_object_per_configuration(capsys: pytest.CaptureFixture[str]) -> None:
