@@ -4,17 +4,18 @@ ArduPilot Rover counts a guided target as reached once it is within ``WP_RADIUS`
 and holds still there. The mission steers from cell to cell (1.25 m apart on the default area), so
 with such an autopilot the next target is often inside the radius already and the vehicle never
 moves again. ``Lead`` learns the radius from the vehicle's own behaviour, with no setting: a
-vehicle that stays put for ``STALL_S`` while its target is ``STALL_MIN_M`` to ``MAX_RADIUS_M``
-away has an acceptance radius at least that large. Once the radius r is known, each setpoint is
-the first point of the plan ``r + LEAD_MARGIN_M`` away (pure pursuit); a point of the plan nearer
-than that (its end, or a corner round an obstacle) is overrun by ``r + OVERRUN_M`` along the line
-of sight, so that the vehicle drives through it and stops just past it, not r short of it.
+vehicle that stays put for ``STALL_S`` while every target it is sent lies ``STALL_MIN_M`` to
+``MAX_RADIUS_M`` away has an acceptance radius at least as large as the farthest. Once the
+radius r is known, each setpoint is the first point of the plan ``r + LEAD_MARGIN_M`` away (pure
+pursuit); a point of the plan nearer than that (its end, or a corner round an obstacle) is overrun
+by ``r + OVERRUN_M`` along the line of sight, so that the vehicle drives through it and stops just
+past it, not r short of it.
 While r is 0 (a vehicle that drives onto its targets, as the simulator's and ArduCopter's do) the
 setpoint is the plan's first waypoint, as it always was.
 
 Every setpoint passes the safety rule (``planning.safety``): inside the area, outside every
-obstacle, with a clear straight leg from the vehicle; a lead point that fails falls back to the
-plan's own first waypoint, which the mission has already made safe.
+obstacle, with a clear straight leg from the vehicle; where a lead point fails, the farthest
+point of the plan in sight is sent instead, and the vehicle's own position (hold) when none is.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ if TYPE_CHECKING:
     from service.core.grid import Grid
 
 STALL_S = 5.0
-"""A vehicle that has not moved for this long with its target unchanged has stopped short of it
+"""A vehicle that has not moved for this long, every target in reach, has stopped short of them
 (longer than a pivot turn on the spot: Rover turns 180 degrees in 3 s at WP_PIVOT_RATE 60 deg/s)."""
 STOPPED_M = 0.2
 """A vehicle that stays within this of where it was has not moved (a stopped vehicle's position
