@@ -348,20 +348,29 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
     r = kinds.add_parser(
         "model", help="the mapper's P(detection) at the true source against the detector, by position"
     )
-    r.add_argument("--class", dest="classes", action="append", metavar="NAME",
-                   help="measure only this class (repeatable; default: every class)")  # fmt: skip
-    r.add_argument("--runs", type=_at_least(1), default=10, help="missions per class (default 10)")
-    r.add_argument("--first-seed", type=_at_least(0), default=0, help="seeds K..K+N-1 (default 0)")
-    r.add_argument(
-        "--config", default=None, metavar="FILE", help="service configuration (default config/default.toml)"
+    _add_class_run_arguments(r, "one JSON object per class and band")
+    e = kinds.add_parser(
+        "estimate", help="where the map's estimate was while suite missions traced, by how they ended"
     )
-    _add_overrides(r, "KEY=VALUE", "override a service key (e.g. mapping.sigma_x=0.3)", dest="overrides")
-    r.add_argument("--jobs", type=int, default=None, help="worker processes (default: the cores)")
-    r.add_argument("--json", action="store_true", help="one JSON object per class and band")
+    _add_class_run_arguments(e, 'one JSON object per outcome (class "all": the classes together)')
 
     p = kinds.add_parser("plume", help="filament plume model: steps per second at a puff count")
     p.add_argument("--puffs", type=int, default=10_000, help="live puffs at steady state (default 10000)")
     p.add_argument("--json", action="store_true", help="one JSON object")
+
+
+def _add_class_run_arguments(parser: argparse.ArgumentParser, json_help: str) -> None:
+    """The arguments of a diagnostic that runs suite missions class by class."""
+    parser.add_argument("--class", dest="classes", action="append", metavar="NAME",
+                        help="measure only this class (repeatable; default: every class)")  # fmt: skip
+    parser.add_argument("--runs", type=_at_least(1), default=10, help="missions per class (default 10)")
+    parser.add_argument("--first-seed", type=_at_least(0), default=0, help="seeds K..K+N-1 (default 0)")
+    parser.add_argument(
+        "--config", default=None, metavar="FILE", help="service configuration (default config/default.toml)"
+    )
+    _add_overrides(parser, "KEY=VALUE", "override a service key (e.g. mapping.sigma_x=0.3)", dest="overrides")
+    parser.add_argument("--jobs", type=int, default=None, help="worker processes (default: the cores)")
+    parser.add_argument("--json", action="store_true", help=json_help)
 
 
 def _bench(args: argparse.Namespace) -> int:

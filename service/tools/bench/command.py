@@ -13,6 +13,7 @@ from service.tools.progress import progress_bar
 from sim_bridge.scenarios import load_scenario
 
 if TYPE_CHECKING:
+    from service.tools.bench import estimate as estimate_types
     from service.tools.bench import reliability as reliability_types
 
 
@@ -27,6 +28,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_plume(args)
     if args.bench == "model":
         return _run_model(args)
+    if args.bench == "estimate":
+        return _run_estimate(args)
     raise AssertionError(args.bench)
 
 
@@ -178,6 +181,50 @@ def _run_model(args: argparse.Namespace) -> int:
     if len(everything) > 1:
         _print_bands("all", reliability.bands(reliability.Ticks.join(everything)), args.json)
     return 0
+
+
+ESTIMATE_HEADER = (
+    f"{'class':<16}{'outcome':<22}{'missions':>9}{'traced':>8}{'at source':>11}{'+ mass':>8}"
+    f"{'downflow':>10}{'up/beside':>11}{'at odour':>10}{'flat':>6}"
+)
+
+
+def _run_estimate(args: argparse.Namespace) -> int:
+    from service.tools.bench import estimate
+
+    files = _class_files("estimate", None, args.classes)
+    batches = suite.class_missions(files, args.runs, args.first_seed, args.config, args.overrides)
+    if not args.json:
+        print(
+            f"where the map's estimate was in the ticks traced (trace, lost), by how the mission ended: "
+            f"{_missions(args, files)}; at source: within one cell of the source's, + mass: with the "
+            f"declaration's mass around it (only a guard holds it back); at odour: within "
+            f"{estimate.AT_ODOUR_M:g} m of a detection; flat: no cell above {estimate.FLAT_RATIO:g} "
+            "times the uniform share",
+            flush=True,
+        )
+        print(ESTIMATE_HEADER, flush=True)
+    ended: dict[str, list[tuple[str, estimate.Places]]] = {}
+    for name, outcome, places in estimate.run(batches, args.jobs):
+        ended.setdefault(name, []).append((outcome, places))
+        if len(ended[name]) == args.runs:
+            _print_outcomes(name, estimate.outcomes(ended[name]), args.json)
+    if len(ended) > 1:
+        _print_outcomes("all", estimate.outcomes([e for runs in ended.values() for e in runs]), args.json)
+    return 0
+
+
+def _print_outcomes(name: str, outcomes: list[estimate_types.Outcome], as_json: bool) -> None:
+    for o in outcomes:
+        if as_json:
+            print(json.dumps({"class": name, **o.as_row()}), flush=True)
+            continue
+        p = o.places
+        print(
+            f"{name:<16}{o.outcome:<22}{o.missions:>9}{p.traced:>8}{p.at_source:>11}{p.at_source_with_mass:>8}"
+            f"{p.away_downflow:>10}{p.away_upflow_or_beside:>11}{p.at_odour:>10}{p.flat:>6}",
+            flush=True,
+        )
 
 
 def _print_bands(name: str, bands: list[reliability_types.Band], as_json: bool) -> None:
