@@ -164,16 +164,24 @@ def _missions(args: argparse.Namespace, files: list[Path]) -> str:
     )
 
 
+def _class_batches(
+    args: argparse.Namespace, command: str, title: str
+) -> list[tuple[str, list[suite.SuiteMission]]]:
+    """The missions of a diagnostic over the suite's classes, announced by ``title`` (its
+    ``{missions}`` filled in) unless the output is JSON."""
+    files = _class_files(command, None, args.classes)
+    batches = suite.class_missions(files, args.runs, args.first_seed, args.config, args.overrides)
+    if not args.json:
+        print(title.format(missions=_missions(args, files)), flush=True)
+    return batches
+
+
 def _run_model(args: argparse.Namespace) -> int:
     from service.tools.bench import reliability
 
-    files = _class_files("model", None, args.classes)
-    batches = suite.class_missions(files, args.runs, args.first_seed, args.config, args.overrides)
-    if not args.json:
-        print(
-            f"the model's P(detection | the true source) against the detector: {_missions(args, files)}",
-            flush=True,
-        )
+    batches = _class_batches(
+        args, "model", "the model's P(detection | the true source) against the detector: {missions}"
+    )
     everything = []
     for name, ticks in reliability.run(batches, args.jobs):
         everything.append(ticks)
@@ -192,17 +200,15 @@ ESTIMATE_HEADER = (
 def _run_estimate(args: argparse.Namespace) -> int:
     from service.tools.bench import estimate
 
-    files = _class_files("estimate", None, args.classes)
-    batches = suite.class_missions(files, args.runs, args.first_seed, args.config, args.overrides)
+    batches = _class_batches(
+        args,
+        "estimate",
+        "where the map's estimate was in the ticks traced (trace, lost), by how the mission ended: "
+        "{missions}; at source: within one cell of the source's, + mass: with the declaration's mass "
+        f"around it (only a guard holds it back); at odour: within {estimate.AT_ODOUR_M:g} m of a "
+        f"detection; flat: no cell above {estimate.FLAT_RATIO:g} times the uniform share",
+    )
     if not args.json:
-        print(
-            f"where the map's estimate was in the ticks traced (trace, lost), by how the mission ended: "
-            f"{_missions(args, files)}; at source: within one cell of the source's, + mass: with the "
-            f"declaration's mass around it (only a guard holds it back); at odour: within "
-            f"{estimate.AT_ODOUR_M:g} m of a detection; flat: no cell above {estimate.FLAT_RATIO:g} "
-            "times the uniform share",
-            flush=True,
-        )
         print(ESTIMATE_HEADER, flush=True)
     ended: dict[str, list[tuple[str, estimate.Places]]] = {}
     for name, outcome, places in estimate.run(batches, args.jobs):

@@ -25,9 +25,8 @@ from service.api import Search, Step
 from service.core.mission.events import MissionState
 from service.core.planning.declaration import mass_within
 from service.tools.bench.search import run_mission, within_one_cell
-from service.tools.bench.suite import SuiteMission, drawn_world
+from service.tools.bench.suite import SuiteMission, drawn_world, source_and_flow
 from service.tools.bench.workers import in_order
-from sim_bridge.scenarios import place
 
 AT_ODOUR_M = 5.0
 """An estimate this close to a detection of the mission counts as placed at the odour."""
@@ -69,11 +68,7 @@ class Outcome:
 def mission_places(spec: SuiteMission) -> tuple[str, Places]:
     """How one suite mission ended, and where its estimate was while it traced (a worker's task)."""
     drawn = drawn_world(spec)
-    placement = place(drawn.scenario, spec.seed)
-    sx, sy = placement.source_m
-    fx, fy = placement.mean_flow_mps
-    speed = math.hypot(fx, fy)
-    ux, uy = (fx / speed, fy / speed) if speed > 0 else (1.0, 0.0)
+    (sx, sy), (ux, uy) = source_and_flow(drawn, spec.seed)
     area = drawn.scenario.grid
     places = Places()
     odour: list[tuple[float, float]] = []

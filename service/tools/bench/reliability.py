@@ -21,9 +21,8 @@ import numpy.typing as npt
 
 from service.api import Search, Step
 from service.tools.bench.search import run_mission
-from service.tools.bench.suite import SuiteMission, drawn_world
+from service.tools.bench.suite import SuiteMission, drawn_world, source_and_flow
 from service.tools.bench.workers import in_order
-from sim_bridge.scenarios import place
 
 ON_LINE_M = 2.0
 """A tick counts as on the source's flow line when the vehicle is at most this far across it."""
@@ -73,11 +72,7 @@ class Band:
 def mission_ticks(spec: SuiteMission) -> Ticks:
     """The ticks of one suite mission (a worker's task)."""
     drawn = drawn_world(spec)
-    placement = place(drawn.scenario, spec.seed)
-    sx, sy = placement.source_m
-    fx, fy = placement.mean_flow_mps
-    speed = math.hypot(fx, fy)
-    ux, uy = (fx / speed, fy / speed) if speed > 0 else (1.0, 0.0)
+    (sx, sy), (ux, uy) = source_and_flow(drawn, spec.seed)
     rows: list[tuple[float, float, float, bool]] = []
 
     def record(search: Search, step: Step) -> None:

@@ -33,6 +33,7 @@ from sim_bridge.generator import (
     draw_scenario,
     load_class,
 )
+from sim_bridge.scenarios import place
 
 SUMMARY_KEYS = ("classes", "missions", "worst_class", "worst_success_rate", "wrong_rate", "missions_per_s")
 
@@ -84,6 +85,15 @@ def drawn_world(spec: SuiteMission) -> DrawnWorld:
     vehicle = world.vehicle.model_copy(update={"arrival_radius_m": spec.arrival_radius_m})
     scenario = replace(drawn.scenario, world=world.model_copy(update={"vehicle": vehicle}))
     return replace(drawn, scenario=scenario)
+
+
+def source_and_flow(drawn: DrawnWorld, seed: int) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Where the drawn world's source is (m) and the unit direction of its mean flow (East when
+    there is none): the frame a diagnostic measures along and across."""
+    placement = place(drawn.scenario, seed)
+    fx, fy = placement.mean_flow_mps
+    speed = math.hypot(fx, fy)
+    return placement.source_m, ((fx / speed, fy / speed) if speed > 0 else (1.0, 0.0))
 
 
 def run_suite_mission(spec: SuiteMission) -> tuple[MissionResult, float]:
