@@ -165,10 +165,10 @@ class Lead:
         that has stood still for ``STALL_S`` within the radius of it. Where an obstacle or the
         area's edge lies just beyond the end, no overrun gets such a vehicle any nearer: the end is
         as near as it will go, and planning on from (x, y) would send it there again."""
-        since, asked = self._since, self._last_call
+        since = self._since
         if self.radius_m <= 0.0 or not plan or since is None or t_s - since[0] < STALL_S:
             return x, y
-        if asked is None or t_s - asked > CALL_GAP_S:  # not commanding (pilot, link): not held by us
+        if not self._commanding(t_s):  # the pilot or a lost link stopped it, not our targets
             return x, y
         end = plan[-1]
         still = math.hypot(x - since[1], y - since[2]) <= STOPPED_M
@@ -176,11 +176,15 @@ class Lead:
             return end.x, end.y
         return x, y
 
+    def _commanding(self, t_s: float) -> bool:
+        """Whether setpoints were asked for within ``CALL_GAP_S`` before ``t_s``."""
+        return self._last_call is not None and t_s - self._last_call <= CALL_GAP_S
+
     def _watch(self, t_s: float, x: float, y: float, target: Waypoint | None) -> None:
         """Learn the radius from a vehicle that stays put while every target it is sent lies
         0.3-5 m away: it stops short of them all, so its radius is at least the farthest. (The
         targets may change meanwhile: the map moves the estimate while the vehicle waits.)"""
-        paused = self._last_call is None or t_s - self._last_call > CALL_GAP_S
+        paused = not self._commanding(t_s)
         self._last_call = t_s
         since = self._since
         away = math.inf if target is None else math.hypot(target.x - x, target.y - y)
