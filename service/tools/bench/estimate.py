@@ -84,7 +84,7 @@ def mission_places(spec: SuiteMission) -> tuple[str, Places]:
         ex, ey = grid.centre(cell)
         places.traced += 1
         if within_one_cell(area, ex, ey, sx, sy):
-            decl = search.config.declaration
+            decl = search.config.declaration.for_mapper(search.mapper.name)  # as the mission's rule
             if mass_within(grid, pi, cell, decl.radius_m) >= decl.probability:
                 places.at_source_with_mass += 1
             else:
