@@ -220,6 +220,12 @@ class Search:
         return None if target is None else (target.x, target.y)
 
     @property
+    def plan(self) -> tuple[Waypoint, ...]:
+        """The mission's current waypoints, in the order it means to fly them (empty before the
+        first plan, or when it has nowhere to go)."""
+        return self._plan
+
+    @property
     def arrival_radius_m(self) -> float:
         """How far short of its targets the autopilot has been seen to stop (0 until it has)."""
         return self._lead.radius_m

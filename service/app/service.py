@@ -147,7 +147,10 @@ class Service:
             min(self.grid.cell_width_m, self.grid.cell_height_m), config.declaration.radius_m
         )
         """The Foxglove-drawable messages of each tick (recorded, and live with ``foxglove.listen``)."""
-        self.target: Waypoint | None = None
+        self._halted = False
+        """Commanding has stopped for good (the run is ending)."""
+        self._refused = False
+        """The plan's setpoint was refused as unsafe: nothing is commanded until the next plan."""
         self.declared: SourceDeclared | None = None
         self.edges: Edges | None = None
         """The open edges while the service runs (for probes and tests; the tasks get them passed)."""
@@ -223,17 +226,27 @@ class Service:
                 ):
                     tasks.create_task(_ends_run(job, ended), name=name)
                 await ended.wait()
-                self.target = None  # stop commanding before anything else
+                self._halted = True  # stop commanding before anything else
                 raise _Stop
         except* _Stop:
             pass
         except* BaseException as group:
-            self.target = None
+            self._halted = True
             raise _first(group) from None
         finally:
             self._note_link(edges.link)
             log.info("stopped: %s", self.stats.summary())
         return self.stats
+
+    @property
+    def target(self) -> Waypoint | None:
+        """The first waypoint of the search's plan, which the service commands while the gate
+        allows; None with no plan, once the run is ending, or after the plan's setpoint was
+        refused as unsafe (until the mission plans again)."""
+        plan = self.search.plan
+        if self._halted or self._refused or not plan:
+            return None
+        return plan[0]
 
     # -- tasks --------------------------------------------------------------------------------
 
@@ -310,7 +323,7 @@ class Service:
         self.stats.observations += 1
         self.stats.state = str(step.state)
         if step.waypoints is not None:
-            self.target = Waypoint(*step.waypoints[0]) if step.waypoints else None
+            self._refused = False
         self._publish(edges, step)
         for event in step.events:
             self._announce(edges, event)
@@ -414,14 +427,16 @@ class Service:
             return False
         # the plan's first waypoint, or a point ahead of an autopilot that stops short of it
         point = self.search.setpoint(now)
-        target = self.target if point is None else Waypoint(*point)
+        if point is None:
+            return False
+        target = Waypoint(*point)
         # the mission plans on the model grid and its safety rule used that grid's obstacle cells:
         # an area cell that an obstacle covers only in part is partly free there (every obstacle
         # rectangle is refused on either grid)
         if not is_safe_point(self.search.model_grid, target.x, target.y):
             self.stats.unsafe_targets += 1
             log.error("refused unsafe target (%.2f, %.2f)", target.x, target.y)
-            self.target = None
+            self._refused = True
             return False
         cfg = self.config.mavlink
         edges.link.send_setpoint(

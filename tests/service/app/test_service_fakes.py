@@ -261,13 +261,20 @@ def test_a_target_beside_an_obstacle_goes_out_where_the_mission_planned_it() -> 
     service = Service(config, clock=Clock(SPEED))
     service.gate.heard(Heartbeat(0.0, 1, 1, 10, 3, config.mavlink.guided_mode, armed=True))
     service._update_gate(edges, 0.5)
-    service.target = Waypoint(57.1, 3.0)
+    search = service.search
+    search.add_position(0.5, 60.0, 3.0)
+    # the mission's plan, staged: its planners never plan into an obstacle, and the service's own
+    # check is the last line of defence
+    search._plan = (Waypoint(57.1, 3.0),)
+    assert service.target == Waypoint(57.1, 3.0)
     assert service._command(edges, 0.5)
     assert [(x, y) for _, _, x, y, _, _ in link.of("setpoint")] == [(57.1, 3.0)]
-    service.target = Waypoint(56.0, 3.0)  # inside the rectangle: refused, and commanding stops
+    search._plan = (Waypoint(56.0, 3.0),)  # inside the rectangle: refused, and commanding stops
     assert not service._command(edges, 1.0)
     assert service.stats.unsafe_targets == 1
     assert service.target is None
+    assert not service._command(edges, 1.5)  # and stays stopped until the mission plans again
+    assert service.stats.unsafe_targets == 1
     assert len(recorder.setpoints) == 1
 
 
@@ -281,7 +288,6 @@ def test_an_autopilot_that_stops_short_is_led_and_told_of_once() -> None:
     service._update_gate(edges, 0.5)
     search = service.search
     search._plan = (Waypoint(52.0, 0.0),)  # the mission's plan: one point 2 m east of the vehicle
-    service.target = Waypoint(52.0, 0.0)
     for k in range(int(2 * STALL_S) + 4):  # the vehicle stays put at (50, 0) while commanded
         search.add_position(0.5 * k, 50.0, 0.0)
         assert service._command(edges, 0.5 * k)
