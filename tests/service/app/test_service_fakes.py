@@ -278,6 +278,27 @@ def test_a_target_beside_an_obstacle_goes_out_where_the_mission_planned_it() -> 
     assert len(recorder.setpoints) == 1
 
 
+def test_commanding_resumes_when_the_mission_plans_again_after_a_refusal() -> None:
+    config = build_config({"area": {"obstacles": [[36.25, 0.25, 56.25, 7.75]]}})
+    link, _, _, edges = fakes()
+    service = Service(config, clock=Clock(SPEED))
+    service.gate.heard(Heartbeat(0.0, 1, 1, 10, 3, config.mavlink.guided_mode, armed=True))
+    service._update_gate(edges, 0.5)
+    search = service.search
+    search.add_position(0.5, 60.0, 3.0)
+    search._plan = (Waypoint(56.0, 3.0),)  # staged inside the obstacle: refused
+    assert not service._command(edges, 0.5)
+    assert service.target is None
+    # the next tick's observation makes the mission plan again (a plume-finding leg)
+    search.add_position(0.9, 60.0, 3.0)
+    search.add_flow(0.9, 1.0, 0.0)
+    search.add_chemical(0.9, 0.0)
+    service._tick(edges, 1.0, 0.0)
+    assert service.target == search.plan[0]
+    assert len(link.of("setpoint")) == 1  # the tick commanded the new plan's target at once
+    assert service.stats.unsafe_targets == 1
+
+
 def test_an_autopilot_that_stops_short_is_led_and_told_of_once() -> None:
     # Rover holds 2 m short of a guided target (WP_RADIUS): once the search has seen it stop short,
     # the setpoints sent lead the vehicle through its targets; the log and the recording say so once
