@@ -163,6 +163,14 @@ def fakes() -> tuple[FakeLink, FakeMaps, FakeRecorder, Edges]:
     return link, maps, recorder, Edges(link, maps, recorder)
 
 
+def guided_service(config: Config, edges: Edges) -> Service:
+    """A service whose gate has heard an armed autopilot in GUIDED: it may command at once."""
+    service = Service(config, clock=Clock(SPEED))
+    service.gate.heard(Heartbeat(0.0, 1, 1, 10, 3, config.mavlink.guided_mode, armed=True))
+    service._update_gate(edges, 0.5)
+    return service
+
+
 def test_the_service_maps_publishes_records_and_commands_over_fake_edges() -> None:
     link, maps, recorder, edges = fakes()
 
@@ -258,9 +266,7 @@ def test_a_target_beside_an_obstacle_goes_out_where_the_mission_planned_it() -> 
     # area's 2.5 m cell 55-57.5 m: (57.1, 3) is free on the mission's grid and must be sent
     config = build_config({"area": {"obstacles": [[36.25, 0.25, 56.25, 7.75]]}})
     link, _, recorder, edges = fakes()
-    service = Service(config, clock=Clock(SPEED))
-    service.gate.heard(Heartbeat(0.0, 1, 1, 10, 3, config.mavlink.guided_mode, armed=True))
-    service._update_gate(edges, 0.5)
+    service = guided_service(config, edges)
     search = service.search
     search.add_position(0.5, 60.0, 3.0)
     # the mission's plan, staged: its planners never plan into an obstacle, and the service's own
@@ -281,9 +287,7 @@ def test_a_target_beside_an_obstacle_goes_out_where_the_mission_planned_it() -> 
 def test_commanding_resumes_when_the_mission_plans_again_after_a_refusal() -> None:
     config = build_config({"area": {"obstacles": [[36.25, 0.25, 56.25, 7.75]]}})
     link, _, _, edges = fakes()
-    service = Service(config, clock=Clock(SPEED))
-    service.gate.heard(Heartbeat(0.0, 1, 1, 10, 3, config.mavlink.guided_mode, armed=True))
-    service._update_gate(edges, 0.5)
+    service = guided_service(config, edges)
     search = service.search
     search.add_position(0.5, 60.0, 3.0)
     search._plan = (Waypoint(56.0, 3.0),)  # staged inside the obstacle: refused
@@ -304,9 +308,7 @@ def test_an_autopilot_that_stops_short_is_led_and_told_of_once() -> None:
     # the setpoints sent lead the vehicle through its targets; the log and the recording say so once
     config = Config()
     link, _, recorder, edges = fakes()
-    service = Service(config, clock=Clock(SPEED))
-    service.gate.heard(Heartbeat(0.0, 1, 1, 10, 3, config.mavlink.guided_mode, armed=True))
-    service._update_gate(edges, 0.5)
+    service = guided_service(config, edges)
     search = service.search
     search._plan = (Waypoint(52.0, 0.0),)  # the mission's plan: one point 2 m east of the vehicle
     for k in range(int(2 * STALL_S) + 4):  # the vehicle stays put at (50, 0) while commanded
