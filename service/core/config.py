@@ -110,6 +110,8 @@ class MappingConfig(_Section):
     drift_spread: float = Field(default=0.3, ge=0)
     forgetting: float = Field(default=0.003, ge=0, lt=1)
     zero_lag: bool = True
+    footprint_m: float = Field(default=0.8, ge=0)
+    footprint_growth: float = Field(default=0.1, ge=0)
     prehistory: bool = True
     epsilon_d: float = Field(default=0.2, gt=0, lt=1)
     epsilon_c: float = Field(default=0.02, gt=0, lt=1)

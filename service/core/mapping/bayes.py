@@ -30,18 +30,21 @@ from service.core.mapping.mapper import ObservationModelMapper
 class BayesMapper(ObservationModelMapper):
     name: ClassVar[str] = "bayes"
 
-    def event_likelihood(self, cell: int) -> FloatArray:
-        """L_i of eq. 5 for a vehicle in flat cell ``cell``: expected filaments there, shape (n, m)."""
-        px, py = self._filament_factors(cell)
+    def event_likelihood(self, cell: int, at: tuple[float, float] | None = None) -> FloatArray:
+        """L_i of eq. 5 for a vehicle in flat cell ``cell`` (at ``at`` in it): expected filaments
+        there, shape (n, m)."""
+        px, py = self._filament_factors(cell, at)
         # eq. 5: pi_i = sum_l P_i(t_l), with P_i(t_l) = py_l(row) px_l(col)
         out: FloatArray = py.T @ px
         return out
 
-    def _event_probability(self, cell: int, detected: bool) -> FloatArray:
+    def _event_probability(
+        self, cell: int, detected: bool, at: tuple[float, float] | None = None
+    ) -> FloatArray:
         """P(d | i) = pf + (1 - pf) mu q_i, or P(no d | i) = (1 - pf)(1 - mu q_i), shape (n, m)."""
         p = self.params
         # the miss floor r caps what odour in the cell promises: P(no d | i) >= (1 - pf) r
-        seen = (1.0 - p.miss_floor) * p.mu * np.minimum(self.event_likelihood(cell), 1.0)
+        seen = (1.0 - p.miss_floor) * p.mu * np.minimum(self.event_likelihood(cell, at), 1.0)
         out: FloatArray = (
             p.false_alarm + (1.0 - p.false_alarm) * seen if detected else (1.0 - p.false_alarm) * (1.0 - seen)
         )

@@ -28,6 +28,24 @@ error linear in the lag; one that changes every tick (rho = 0: white noise, as i
 turbulent case, whose flow is the same everywhere and whose record is exact) gives k s sqrt(tau dt),
 a random walk no wider than the filament's own. The axes stay independent, so p_ij stays separable.
 
+A point detector with a growing footprint (ours, off by default): the papers count a filament as
+smelt when it lies anywhere in the vehicle's cell. A source in the vehicle's own cell then always has
+this tick's filament there, and each detection favours that cell over a source upflow, whose
+filaments have spread; the detector does the opposite, since a plume is narrow at its source and
+wider downflow (docs/search-benchmark.md, step 18). With ``footprint_m`` = r0 > 0 the detector sits
+at the vehicle's position and smells a filament of age tau within
+
+    r(tau) = sqrt(r0^2 + g tau)                                             (footprint eq. F1)
+
+of its centre on each axis (g = ``footprint_growth``, m^2/s: a puff's radius grows as it ages),
+the source uniform over its cell. Per axis, with c the vehicle's position less the drift, s the
+filament's spread and [x_lo, x_hi] the source cell of width L,
+
+    P = [I(c + r) - I(c - r)] / L,   I(a) = s [G((a - x_lo) / s) - G((a - x_hi) / s)]   (eq. F2)
+
+where G(z) = z Phi(z) + phi(z) is the integral of the normal CDF (I(a) is the integral over the
+cell of Phi((a - X) / s)). The axes stay independent, so p_ij stays separable.
+
 A release older than the service (ours): a source has usually been releasing long before the
 vehicle arrives, and the flow before the first tick is unknown, not absent. Counting only the
 releases since the service started would let a plume reach only as far downflow as the flow has
@@ -158,6 +176,31 @@ def axis_cell_mass(edges: FloatArray, centre: FloatArray, spread: FloatArray) ->
     return np.clip(mass, 0.0, 1.0)
 
 
+def _normal_cdf_integral(z: FloatArray) -> FloatArray:
+    """G(z) = z Phi(z) + phi(z), whose derivative is Phi(z)."""
+    out: FloatArray = z * ndtr(z) + np.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi)
+    return out
+
+
+def footprint_mass(
+    edges: FloatArray, centre: FloatArray, spread: FloatArray, radius: FloatArray
+) -> FloatArray:
+    """P(|X + W - centre_l| < radius_l) for X uniform over each cell between consecutive ``edges``
+    and W ~ N(0, spread_l^2): footprint eq. F2, shape (W, len(edges) - 1). A zero spread is the
+    overlap of the footprint with the cell, over the cell's width."""
+    s = np.maximum(spread, 1e-9)[:, None]
+    lo, hi = edges[None, :-1], edges[None, 1:]
+
+    def integral(a: FloatArray) -> FloatArray:
+        # I(a) of eq. F2: the integral of Phi((a - X) / s) over X in [lo, hi]
+        out: FloatArray = s * (_normal_cdf_integral((a - lo) / s) - _normal_cdf_integral((a - hi) / s))
+        return out
+
+    c, r = centre[:, None], radius[:, None]
+    mass: FloatArray = (integral(c + r) - integral(c - r)) / np.diff(edges)[None, :]
+    return np.clip(mass, 0.0, 1.0)
+
+
 def filament_factors(
     grid: Grid,
     x_m: float,
@@ -169,6 +212,8 @@ def filament_factors(
     sigma_y: float,
     drift_error_x_m: FloatArray | None = None,
     drift_error_y_m: FloatArray | None = None,
+    footprint_m: float = 0.0,
+    footprint_growth: float = 0.0,
 ) -> tuple[FloatArray, FloatArray]:
     """Per-axis factors Px (W, m), Py (W, n) of p_ij(t_l, t_k) for a vehicle cell centred at (x, y).
 
@@ -177,6 +222,8 @@ def filament_factors(
     source position of eq. 4, X_s ~ N(X_j - V(t_l, t_k), (t_k - t_l) sigma^2), which is the same
     as the mass of the filament over C_j (pomdp-astar eq. 1, exact per cell rather than midpoint).
     ``drift_error_*_m`` (e_tau of eq. D1, one per release time, m) widen it by the drift error.
+    With ``footprint_m`` > 0, (x, y) is the detector's own position and the filament is smelt
+    within r(tau) of eq. F1 of it instead of in the cell (eq. F2).
     """
     x_edges: FloatArray = grid.x_min + np.arange(grid.columns + 1, dtype=np.float64) * grid.cell_width_m
     y_edges: FloatArray = grid.y_min + np.arange(grid.rows + 1, dtype=np.float64) * grid.cell_height_m
@@ -185,6 +232,12 @@ def filament_factors(
     root_lag = np.sqrt(lag_s)
     spread_x = np.hypot(sigma_x * root_lag, 0.0 if drift_error_x_m is None else drift_error_x_m)
     spread_y = np.hypot(sigma_y * root_lag, 0.0 if drift_error_y_m is None else drift_error_y_m)
+    if footprint_m > 0.0:
+        # footprint eq. F1: the detection radius of a filament of each release time's age
+        radius = np.sqrt(footprint_m**2 + footprint_growth * lag_s)
+        px = footprint_mass(x_edges, x_m - drift_x_m, spread_x, radius)
+        py = footprint_mass(y_edges, y_m - drift_y_m, spread_y, radius)
+        return px, py
     px = axis_cell_mass(x_edges, x_m - drift_x_m, spread_x)
     py = axis_cell_mass(y_edges, y_m - drift_y_m, spread_y)
     return px, py
@@ -200,10 +253,15 @@ def history_factors(
     zero_lag: bool = False,
     drift_spread: float = 0.0,
     reach_m: float = 0.0,
+    footprint_m: float = 0.0,
+    footprint_growth: float = 0.0,
+    at: tuple[float, float] | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """``filament_factors`` for flat cell ``cell`` over every release time in ``history``; with
     ``zero_lag`` also the release of this very tick (lag 0, still at its source: the first row);
-    ``drift_spread`` is k of eq. D1 (0: the papers' model); ``reach_m`` > 0 adds the prehistory."""
+    ``drift_spread`` is k of eq. D1 (0: the papers' model); ``reach_m`` > 0 adds the prehistory;
+    ``footprint_m`` > 0 the point detector of eq. F1-F2, at ``at`` (the vehicle's position in
+    ``cell``; the cell's centre when None)."""
     steps = list(history)
     lag, drift_x, drift_y = release_offsets(steps, reach_m)
     if zero_lag:
@@ -211,7 +269,7 @@ def history_factors(
         # previous tick, so a vehicle in the source's cell would need last tick's filament not to
         # have left the cell (it often has, at 1 m/s in a 2.5 m cell) to expect a detection
         lag, drift_x, drift_y = (np.concatenate([[0.0], a]) for a in (lag, drift_x, drift_y))
-    x, y = grid.centre(cell)
+    x, y = at if at is not None and footprint_m > 0.0 else grid.centre(cell)
     error_x = error_y = None
     if drift_spread > 0.0 and steps:
         sd_x, sd_y = flow_spread(steps)
@@ -219,4 +277,6 @@ def history_factors(
         dt = float(np.mean([s.dt_s for s in steps]))
         error_x = drift_spread * drift_error_m(lag, dt, sd_x, rho_x)
         error_y = drift_spread * drift_error_m(lag, dt, sd_y, rho_y)
-    return filament_factors(grid, x, y, lag, drift_x, drift_y, sigma_x, sigma_y, error_x, error_y)
+    return filament_factors(
+        grid, x, y, lag, drift_x, drift_y, sigma_x, sigma_y, error_x, error_y, footprint_m, footprint_growth
+    )

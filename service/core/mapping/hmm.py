@@ -41,7 +41,7 @@ class HmmMapper(SourceMapper):
         p = self.params
         return p.false_alarm + (1.0 - p.false_alarm) * p.mu * self.beta_bar(cell)
 
-    def _assimilate(self, cell: int, detected: bool) -> None:
+    def _assimilate(self, cell: int, detected: bool, at: tuple[float, float]) -> None:
         beta = self.beta_bar(cell)
         total = float(beta.sum())
         if total <= 0.0:

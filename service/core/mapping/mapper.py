@@ -60,6 +60,12 @@ class MapperParams:
     papers' models). A plume narrower than a cell, or intermittent, can leave a vehicle in a
     cell it crosses dry; without a floor one such non-detection all but rules out every source
     whose filaments the model puts there (Bayesian and POMDP mappers)."""
+    footprint_m: float = 0.0
+    """Radius r0 (m) within which the detector, at the vehicle's position, smells a filament just
+    released; 0: the papers' detection, a filament anywhere in the vehicle's cell (``filament``,
+    eq. F1-F2; Bayesian and POMDP mappers)."""
+    footprint_growth: float = 0.0
+    """g (m^2/s): a filament's detection radius is sqrt(r0^2 + g tau) at age tau (eq. F1)."""
     prehistory: bool = False
     """The release began before the service: continue the flow record back with its mean step
     until every source in the area is in reach (``filament.release_offsets``; Bayesian and POMDP
@@ -80,6 +86,11 @@ class MapperParams:
             raise ValueError(f"drift_spread must be >= 0, got {self.drift_spread}")
         if not 0 <= self.forgetting < 1:
             raise ValueError(f"forgetting must be in [0, 1), got {self.forgetting}")
+        if not (self.footprint_m >= 0.0 and self.footprint_growth >= 0.0):
+            raise ValueError(
+                "footprint_m and footprint_growth must be >= 0, "
+                f"got {self.footprint_m}, {self.footprint_growth}"
+            )
         if not 0 <= self.miss_floor < 1:
             raise ValueError(f"miss_floor must be in [0, 1), got {self.miss_floor}")
         if not (0 < self.epsilon_d < 1 and 0 < self.epsilon_c < 1):
@@ -98,6 +109,8 @@ class MapperParams:
             false_alarm=s.false_alarm_probability,
             miss_floor=s.miss_floor,
             zero_lag=m.zero_lag,
+            footprint_m=m.footprint_m,
+            footprint_growth=m.footprint_growth,
             prehistory=m.prehistory,
             epsilon_d=m.epsilon_d,
             epsilon_c=m.epsilon_c,
@@ -192,7 +205,7 @@ class SourceMapper(ABC):
         if not self.grid.contains(obs.x, obs.y):
             self._ignore("outside_area")
             return False
-        self._assimilate(self.grid.cell_of(obs.x, obs.y), obs.detected)
+        self._assimilate(self.grid.cell_of(obs.x, obs.y), obs.detected, (obs.x, obs.y))
         return True
 
     def save_state(self) -> dict[str, Any]:
@@ -257,8 +270,9 @@ class SourceMapper(ABC):
         self.ignored[reason] = self.ignored.get(reason, 0) + 1
 
     @abstractmethod
-    def _assimilate(self, cell: int, detected: bool) -> None:
-        """Fuse a detection (or non-detection) in flat cell ``cell`` at the latest tick into pi."""
+    def _assimilate(self, cell: int, detected: bool, at: tuple[float, float]) -> None:
+        """Fuse a detection (or non-detection) in flat cell ``cell``, by a vehicle at ``at`` (map
+        frame, m), at the latest tick into pi."""
 
     @abstractmethod
     def detection_likelihood(self, cell: int) -> FloatArray:
@@ -271,8 +285,11 @@ class ObservationModelMapper(SourceMapper):
     """A mapper that fuses each event by Bayes' rule through its own observation model
     P(event | source in each cell): the Bayesian and POMDP mappers differ only in that model."""
 
-    def _filament_factors(self, cell: int) -> tuple[FloatArray, FloatArray]:
-        """Px (W, m) and Py (W, n): one filament per release time of the window, seen from ``cell``."""
+    def _filament_factors(
+        self, cell: int, at: tuple[float, float] | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """Px (W, m) and Py (W, n): one filament per release time of the window, seen from ``cell``
+        (from the position ``at`` in it, with a footprint; its centre otherwise)."""
         p = self.params
         return history_factors(
             self.grid,
@@ -283,17 +300,23 @@ class ObservationModelMapper(SourceMapper):
             zero_lag=p.zero_lag,
             drift_spread=p.drift_spread,
             reach_m=self._reach_m if p.prehistory else 0.0,
+            footprint_m=p.footprint_m,
+            footprint_growth=p.footprint_growth,
+            at=at,
         )
 
     @abstractmethod
-    def _event_probability(self, cell: int, detected: bool) -> FloatArray:
-        """P(this detection / non-detection in flat cell ``cell`` | source in each cell), (n, m)."""
+    def _event_probability(
+        self, cell: int, detected: bool, at: tuple[float, float] | None = None
+    ) -> FloatArray:
+        """P(this detection / non-detection in flat cell ``cell`` | source in each cell), (n, m), for
+        a vehicle at ``at`` in it (its centre when None)."""
 
     def detection_likelihood(self, cell: int) -> FloatArray:
         return self._event_probability(cell, detected=True)
 
-    def _assimilate(self, cell: int, detected: bool) -> None:
-        likelihood = self._event_probability(cell, detected)
+    def _assimilate(self, cell: int, detected: bool, at: tuple[float, float]) -> None:
+        likelihood = self._event_probability(cell, detected, at)
         if not float(np.vdot(self._pi, likelihood)) > 0.0:
             # only possible with pf = 0: no cell explains the event; keep pi rather than reset it
             self._ignore("impossible_event")

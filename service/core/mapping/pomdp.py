@@ -98,17 +98,20 @@ def log_non_detection(px: FloatArray, py: FloatArray, mu: float) -> FloatArray:
 class PomdpMapper(ObservationModelMapper):
     name: ClassVar[str] = "pomdp"
 
-    def log_gamma(self, cell: int) -> FloatArray:
-        """log gamma_ij (eq. 2) for a vehicle in flat cell ``cell``, over the window, shape (n, m)."""
+    def log_gamma(self, cell: int, at: tuple[float, float] | None = None) -> FloatArray:
+        """log gamma_ij (eq. 2) for a vehicle in flat cell ``cell`` (at ``at`` in it), over the
+        window, shape (n, m)."""
         p = self.params
-        px, py = self._filament_factors(cell)
+        px, py = self._filament_factors(cell, at)
         return log_non_detection(px, py, p.mu)
 
-    def _event_probability(self, cell: int, detected: bool) -> FloatArray:
+    def _event_probability(
+        self, cell: int, detected: bool, at: tuple[float, float] | None = None
+    ) -> FloatArray:
         """O(d) = 1 - (1 - pf) gamma' or O(no d) = (1 - pf) gamma' (eq. 3 with false alarms), where
         gamma' = r + (1 - r) gamma with r the miss floor (gamma' = gamma, the paper's, for r = 0)."""
         p = self.params
-        log_gamma = self.log_gamma(cell)
+        log_gamma = self.log_gamma(cell, at)
         if p.miss_floor > 0.0:
             log_gamma = np.log(p.miss_floor + (1.0 - p.miss_floor) * np.exp(log_gamma))
         log_miss = np.log1p(-p.false_alarm) + log_gamma

@@ -47,7 +47,7 @@ class ScriptedMapper(SourceMapper):
         pi.flat[cell] = peak
         self.set(pi)
 
-    def _assimilate(self, cell: int, detected: bool) -> None:
+    def _assimilate(self, cell: int, detected: bool, at: tuple[float, float]) -> None:
         pass
 
     def detection_likelihood(self, cell: int) -> FloatArray:

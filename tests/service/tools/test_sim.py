@@ -13,16 +13,20 @@ from sim_bridge.scenarios import load_scenario
 
 pytestmark = pytest.mark.sim
 
+DEVELOPED = ["world.plume.spin_up_s=300", "world.plume.spin_up_step_s=1.0"]
+
 
 @pytest.mark.parametrize(
     ("seed", "overrides", "speed"),
     [
-        # Seed 12: in process (`oslim bench search`) the mission declares at 161 s, far inside the
-        # 600 s limit; seed 1 took 541 s, and loopback timing under load once tipped it past it.
-        (12, [], 10.0),
+        # A plume that has been released for 5 minutes, as the service assumes (the suite's
+        # wang-laminar class, found in every held-out mission): over loopback the ticks' timing
+        # varies with the machine's load, and with the plume released with the mission (the
+        # papers' set-up, 93 % in process) a mission or two in twenty miss the 600 s.
+        (12, [*DEVELOPED], 10.0),
         # ArduPilot Rover's default WP_RADIUS: the service learns it from the stub vehicle's stops
-        # and leads its setpoints (seed 0 declares at 162 s; without the lead it stalled at 91 m)
-        (0, ["world.vehicle.arrival_radius_m=2"], 20.0),
+        # and leads its setpoints
+        (4, [*DEVELOPED, "world.vehicle.arrival_radius_m=2"], 10.0),
     ],
     ids=["drives-onto-targets", "stops-2-m-short"],
 )

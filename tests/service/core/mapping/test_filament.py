@@ -11,6 +11,7 @@ from service.core.mapping.filament import (
     filament_factors,
     flow_persistence,
     flow_spread,
+    footprint_mass,
     history_factors,
     release_offsets,
 )
@@ -215,3 +216,51 @@ def test_the_prehistory_continues_the_record_with_its_mean_step() -> None:
 def test_without_a_flow_there_is_no_prehistory() -> None:
     lag, _, _ = release_offsets(_flow_steps(3, 0.0), reach_m=10.0)
     assert len(lag) == 3
+
+
+def test_footprint_mass_without_spread_is_the_overlap_with_the_cell() -> None:
+    # eq. F2 with s = 0: the share of the cell [x_lo, x_hi] within r of c, worked by hand
+    edges = np.array([0.0, 1.25, 2.5, 3.75])
+    mass = footprint_mass(edges, np.array([2.0, 1.25]), np.array([0.0, 0.0]), np.array([0.3, 1.0]))
+    # c = 2, r = 0.3: [1.7, 2.3] lies inside the second cell: 0.6 / 1.25
+    np.testing.assert_allclose(mass[0], [0.0, 0.48, 0.0], atol=1e-12)
+    # c = 1.25, r = 1: [0.25, 2.25] covers 1.0 of the first cell and 1.0 of the second
+    np.testing.assert_allclose(mass[1], [0.8, 0.8, 0.0], atol=1e-12)
+
+
+def test_footprint_mass_is_the_averaged_gaussian_window() -> None:
+    # eq. F2 against direct quadrature over the source's position in the cell
+    edges = np.array([-2.0, 0.0, 1.25, 4.0])
+    centre, spread, radius = 0.4, 0.7, 0.9
+    mass = footprint_mass(edges, np.array([centre]), np.array([spread]), np.array([radius]))
+    for k, (lo, hi) in enumerate(itertools.pairwise(edges)):
+        xs = np.linspace(lo, hi, 20001)
+        window = norm.cdf((centre + radius - xs) / spread) - norm.cdf((centre - radius - xs) / spread)
+        assert mass[0, k] == pytest.approx(np.trapezoid(window, xs) / (hi - lo), abs=1e-8)
+
+
+def test_a_footprint_uses_the_position_in_the_cell_and_grows_with_age() -> None:
+    history = [FlowStep(transition(SMALL, 1.0, 0.0, 1.0), 1.0, 0.0, 1.0)] * 3
+    cell = SMALL.cell_of(5.0, 5.0)
+    # without a footprint (the papers'), where in the cell the vehicle is does not matter
+    plain = history_factors(SMALL, cell, history, 0.2, 0.2, zero_lag=True, at=(4.1, 4.1))
+    centred = history_factors(SMALL, cell, history, 0.2, 0.2, zero_lag=True)
+    for a, b in zip(plain, centred, strict=True):
+        np.testing.assert_array_equal(a, b)
+    # with one, the filament released this tick is smelt only from within r0 of the source: from
+    # (4.1, 4.1) a source in the vehicle's own cell [4, 6] x [4, 6] is within 0.5 m in 0.3 of x
+    px, py = history_factors(
+        SMALL, cell, history, 0.2, 0.2, zero_lag=True, footprint_m=0.5, footprint_growth=0.1, at=(4.1, 4.1)
+    )
+    col, row = 2, 2
+    assert px[0, col] == pytest.approx(0.6 / 2.0)
+    assert py[0, row] == pytest.approx(0.6 / 2.0)
+    # older filaments are smelt from farther: the radius sqrt(0.25 + 0.1 tau) grows with the lag
+    lag, _, drift_y = release_offsets(history)
+    radius = np.sqrt(0.25 + 0.1 * np.concatenate([[0.0], lag]))
+    assert np.all(np.diff(radius) > 0)
+    spread = 0.2 * np.sqrt(np.concatenate([[0.0], lag]))
+    expect = footprint_mass(
+        np.array([0.0, 2.0, 4.0, 6.0, 8.0]), 4.1 - np.concatenate([[0.0], drift_y]), spread, radius
+    )
+    np.testing.assert_allclose(py, expect, atol=1e-12)

@@ -22,7 +22,7 @@ class FixedMap(SourceMapper):
     def set(self, pi: FloatArray) -> None:
         self._pi = pi
 
-    def _assimilate(self, cell: int, detected: bool) -> None:
+    def _assimilate(self, cell: int, detected: bool, at: tuple[float, float]) -> None:
         pass
 
     def detection_likelihood(self, cell: int) -> FloatArray:

@@ -24,7 +24,7 @@ class PlumeMap(SourceMapper):
     def set_plume(self, alpha: FloatArray) -> None:
         self._alpha = alpha
 
-    def _assimilate(self, cell: int, detected: bool) -> None:
+    def _assimilate(self, cell: int, detected: bool, at: tuple[float, float]) -> None:
         pass
 
     def detection_likelihood(self, cell: int) -> FloatArray:
