@@ -39,10 +39,9 @@ if TYPE_CHECKING:
     from service.core.mapping.belief import FloatArray
     from service.core.mission.routing import Routing
     from service.core.observation import Observation
-    from service.core.planning.base import PlanContext
+    from service.core.planning.base import BoolArray, PlanContext
     from service.core.planning.crossflow import FlowFrame
     from service.core.planning.declaration import Declaration
-    from service.core.planning.reach import Reachability
 
 PASS_PROBE_MARGIN_M = 0.25
 """The probe to the upflow pass flies this far beyond the upflow pass, so that the pass is met, not grazed."""
@@ -116,7 +115,13 @@ class EstimateProbe:
     observation is worth most (eq. I1): downflow of the estimate when the map's rival lies
     downflow, upflow or beside it when the rival lies there; it need not come back to the
     estimate's cell between probes. A probe beyond an obstacle is a ``detour``, flown until
-    reached."""
+    reached.
+
+    An estimate inside an obstacle cannot be visited, and no cell beside the obstacle tells a
+    source inside it from one beyond it: the plume crosses the obstacle. From the cell nearest
+    the estimate the vehicle then crosses the flow ``across_m`` to each side just upflow of the
+    obstacle on the estimate's line (``beyond``, flown while the estimate stays in an
+    obstacle), where a plume from a source beyond it is met wherever it crosses."""
 
     grid: Grid
     upflow_pass_m: float
@@ -124,7 +129,11 @@ class EstimateProbe:
     """The probe works while the vehicle is this close to the estimate's centre, and chooses among
     cells this close to it: where the rule may fire (the declaration's ``visit_radius_m``), and
     no farther than ``PROBE_REACH`` cells."""
+    across_m: float
+    """Half the width of the pass beyond an obstacle (the declaration's ``check_width_m``; 0: the
+    point on the estimate's line alone)."""
     detour: int | None = None
+    beyond: Pattern | None = None
     pass_target: tuple[int, Waypoint] | None = None
     stopped_short: bool = False
     """The vehicle stopped within ARRIVAL_M of the pass probe's point without making the pass (an
@@ -140,6 +149,11 @@ class EstimateProbe:
             # would turn back at the first step off it, so the probe is flown until reached
             return routing.to_cell(ctx, self.detour)
         self.detour = None
+        if self.beyond is not None:
+            wanted = self.beyond.follow(ctx, routing) if self.grid.obstacle_mask.flat[ctx.goal] else None
+            if wanted is not None:
+                return wanted
+            self.beyond = None
         last, self._last = self._last, (ctx.vehicle.x, ctx.vehicle.y)
         self.stopped_short = False
         if self.pass_target is not None:
@@ -162,7 +176,14 @@ class EstimateProbe:
             return (point,)
         if frame is None:
             return None
-        probe = self._informative(ctx, self._upflow_beyond(ctx.cell, frame, routing.reach))
+        reachable = routing.reach.reachable(ctx.cell)
+        if self.grid.obstacle_mask.flat[ctx.goal]:
+            self.beyond = self._pass_beyond(ctx.goal, frame, reachable)
+            wanted = None if self.beyond is None else self.beyond.follow(ctx, routing)
+            if wanted is not None:
+                return wanted
+            self.beyond = None
+        probe = self._informative(ctx, self._upflow_beyond(ctx.cell, frame, reachable))
         if probe is None:
             return None
         row, col = self.grid.row_col(ctx.cell)
@@ -215,15 +236,12 @@ class EstimateProbe:
         best_row, best_col = cells[int(np.argmax(gain))]
         return int(best_row) * grid.columns + int(best_col)
 
-    def _upflow_beyond(self, cell: int, frame: FlowFrame | None, reach: Reachability) -> int | None:
-        """The first free cell reachable from ``cell`` on the line upflow of its centre, if any: the
+    def _upflow_beyond(self, cell: int, frame: FlowFrame, reachable: BoolArray) -> int | None:
+        """The first cell of ``reachable`` on the line upflow of ``cell``'s centre, if any: the
         upflow neighbour, or against the downflow face of an obstacle the first cell beyond it (the
         plume may cross the obstacle, and only a look beyond it tells a source behind it from one
         in the vehicle's cell)."""
-        if frame is None:
-            return None
         grid = self.grid
-        reachable = reach.reachable(cell)
 
         def beyond(x: float, y: float) -> bool:
             candidate = grid.cell_of(x, y)
@@ -231,6 +249,21 @@ class EstimateProbe:
 
         point = upflow_until(grid, *grid.centre(cell), frame, 0.0, beyond)
         return None if point is None else grid.cell_of(*point)
+
+    def _pass_beyond(self, estimate: int, frame: FlowFrame, reachable: BoolArray) -> Pattern | None:
+        """The pass across the flow at the first reachable point upflow of the obstacle that holds
+        ``estimate``, on the estimate's line; None when the line leaves the area first."""
+        grid = self.grid
+
+        def clear(x: float, y: float) -> bool:
+            return not grid.in_obstacle(x, y) and bool(reachable.flat[grid.cell_of(x, y)])
+
+        point = upflow_until(grid, *grid.centre(estimate), frame, 0.0, clear)
+        if point is None:
+            return None
+        if self.across_m <= 0.0:  # no check across the flow: the point itself
+            return Pattern((Waypoint(*point),))
+        return Pattern(pass_across(grid, *point, frame, self.across_m))
 
 
 class Declaring:
@@ -247,7 +280,9 @@ class Declaring:
         self._declarer = Declarer(grid, config, admit)
         self.check: Check | None = None  # the upflow check of a cell about to be declared
         reach_m = PROBE_REACH * math.hypot(grid.cell_width_m, grid.cell_height_m)
-        self.probe = EstimateProbe(grid, config.upflow_pass_m, min(config.visit_radius_m, reach_m))
+        self.probe = EstimateProbe(
+            grid, config.upflow_pass_m, min(config.visit_radius_m, reach_m), config.check_width_m
+        )
 
     @property
     def armed(self) -> bool:

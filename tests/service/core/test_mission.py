@@ -546,6 +546,30 @@ def test_probes_beyond_an_obstacle_that_blocks_every_upflow_neighbour() -> None:
     assert beyond in visited
 
 
+def test_an_estimate_inside_an_obstacle_is_probed_upflow_beyond_it() -> None:
+    # odour met at the wall's downflow face, from a plume that crosses the wall, puts the estimate
+    # inside it; the nearest free cells beside the wall tell nothing about it, so the mission
+    # looks on the estimate's line just upflow of the wall, where a source beyond it would be met
+    grid = Grid(0.0, 100.0, -50.0, 50.0, columns=20, rows=20, obstacles=((40.0, -5.0, 60.0, 5.0),))
+    inside = grid.cell_of(52.5, 2.5)
+    beyond = grid.cell_of(37.5, 2.5)
+    assert grid.obstacle_mask.flat[inside]
+    mapper = ScriptedMapper(grid)
+    mapper.peak_at(inside)
+    mission = Mission(grid, mapper, PlanningConfig(), NEVER)
+    vehicle = Vehicle(52.5, 7.5)  # beside the wall, the free cell nearest the estimate
+    visited = set()
+    for t in range(40):
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, t == 0), vehicle.state)
+        if out.waypoints is not None:
+            for w in out.waypoints:
+                assert_safe_waypoint(grid, w)
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        visited.add(grid.cell_of(vehicle.x, vehicle.y))
+    assert beyond in visited
+
+
 def test_a_lost_vehicle_beside_an_obstacle_flies_on_to_the_estimate() -> None:
     # the wang scenarios' obstacle ends at x = 56.25, a cell centre; the vehicle loses the plume
     # just past it and flies round it toward the estimate instead of holding

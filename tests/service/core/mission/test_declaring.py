@@ -194,11 +194,13 @@ class SplitMapper(HmmMapper):
         return kernel
 
 
+def new_probe(upflow_pass_m: float = 0.0) -> EstimateProbe:
+    return EstimateProbe(AREA, upflow_pass_m, CONFIG.visit_radius_m, CONFIG.check_width_m)
+
+
 def probe_cell(mapper: SplitMapper) -> int | None:
     ctx = PlanContext(VehicleState(SX, SY, 0.0), SOURCE, SOURCE, mapper)
-    waypoints = EstimateProbe(AREA, upflow_pass_m=0.0, near_m=CONFIG.visit_radius_m).waypoints(
-        ctx, ROUTING, EAST, passed_upflow=False
-    )
+    waypoints = new_probe().waypoints(ctx, ROUTING, EAST, passed_upflow=False)
     return None if waypoints is None else AREA.cell_of(waypoints[-1].x, waypoints[-1].y)
 
 
@@ -218,7 +220,7 @@ def test_near_the_estimate_the_probe_goes_on_without_coming_back_to_its_cell() -
     mapper._pi = np.zeros(fine.shape)
     mapper._pi.flat[estimate] = 0.5
     mapper._pi.flat[estimate + 3] = 0.5  # the rival 3 m downflow
-    probe = EstimateProbe(fine, upflow_pass_m=0.0, near_m=3.0)
+    probe = EstimateProbe(fine, upflow_pass_m=0.0, near_m=3.0, across_m=CONFIG.check_width_m)
     routing = Routing.of(fine, PlanningConfig())
 
     def probe_from(x: float) -> tuple[Waypoint, ...] | None:
@@ -230,13 +232,13 @@ def test_near_the_estimate_the_probe_goes_on_without_coming_back_to_its_cell() -
 
 
 def test_away_from_the_estimate_or_without_a_flow_there_is_no_probe() -> None:
-    probe = EstimateProbe(AREA, upflow_pass_m=0.0, near_m=CONFIG.visit_radius_m)
+    probe = new_probe()
     assert probe.waypoints(ctx_at(SX + 20.0, SY), ROUTING, EAST, passed_upflow=False) is None
     assert probe.waypoints(ctx_at(SX, SY), ROUTING, None, passed_upflow=False) is None
 
 
 def test_the_pass_probe_flies_just_beyond_the_upflow_pass_until_it_is_made() -> None:
-    probe = EstimateProbe(AREA, upflow_pass_m=2.0, near_m=CONFIG.visit_radius_m)
+    probe = new_probe(upflow_pass_m=2.0)
     target = Waypoint(SX - 2.0 - PASS_PROBE_MARGIN_M, SY)
     assert probe.waypoints(ctx_at(SX, SY), ROUTING, EAST, passed_upflow=False) == (target,)
     assert probe.waypoints(ctx_at(SX - 1.0, SY), ROUTING, EAST, passed_upflow=False) == (target,)
@@ -246,5 +248,5 @@ def test_the_pass_probe_flies_just_beyond_the_upflow_pass_until_it_is_made() -> 
 
 
 def test_no_probe_without_a_flow() -> None:
-    probe = EstimateProbe(AREA, upflow_pass_m=2.0, near_m=CONFIG.visit_radius_m)
+    probe = new_probe(upflow_pass_m=2.0)
     assert probe.waypoints(ctx_at(SX, SY), ROUTING, None, passed_upflow=False) is None
