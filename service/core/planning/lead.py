@@ -82,15 +82,16 @@ def lead_point(
     the crow flies; where the straight leg there is not clear (the path turns round an obstacle) or
     the path ends nearer, the farthest point along the path that is in sight, moved on
     ``overrun_m`` along the line of sight, so that the vehicle drives through that point and stops
-    just past it (or, where that is not safe, as ``OVERRUNS`` says). (x, y) itself (hold) when no
-    point is in sight."""
+    just past it (or, where that is not safe, as ``OVERRUNS`` says). When no point is in sight,
+    (x, y) itself (hold), or the plan's first point for a vehicle pressed against an obstacle, where
+    (x, y) is no safe point (the mission's plan is safe, and leads such a vehicle off it)."""
     path = _densified(np.asarray(_up_to_lead([(x, y), *((w.x, w.y) for w in plan)], lead_m), dtype=float))
     for k in range(len(path) - 1, 0, -1):
         aim = (float(path[k, 0]), float(path[k, 1]))
         if is_safe_point(grid, *aim) and segment_clear(grid, (x, y), aim):
             break
     else:
-        return Waypoint(x, y)
+        return Waypoint(x, y) if is_safe_point(grid, x, y) else plan[0]
     away = math.hypot(aim[0] - x, aim[1] - y)
     if away >= lead_m - 1e-9 or away <= 1e-6:
         return Waypoint(*aim)

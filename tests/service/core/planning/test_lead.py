@@ -43,6 +43,10 @@ def test_round_an_obstacle_the_lead_point_is_the_farthest_one_in_sight() -> None
     assert lead_point(WALLED, 8.5, 6.0, plan, 2.0, 0.0) == Waypoint(8.5, 4.0)  # in sight
     # against the wall with a plan through it: nothing in sight but where it stands
     assert lead_point(WALLED, 8.95, 6.0, (Waypoint(11.5, 6.0),), 2.0, 0.0) == Waypoint(8.95, 6.0)
+    # pressed against the wall, where it stands is no safe point: the plan's first point, which
+    # the mission made safe (seen over loopback: a rover against the obstacle's face)
+    off = (Waypoint(8.5, 6.0), Waypoint(11.5, 6.0))
+    assert lead_point(WALLED, 9.0, 6.0, off, 2.0, 0.0) == Waypoint(8.5, 6.0)
 
 
 def _stand(
