@@ -2,6 +2,7 @@ import itertools
 import json
 import math
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -519,6 +520,22 @@ def test_a_lone_detection_in_find_goes_back_to_find(
         assert out.waypoints is None  # the estimate did not move: the path to it is flown on
 
 
+def fly(mission: Mission, vehicle: Vehicle, ticks: int, odour: Callable[[int], bool]) -> set[int]:
+    """The cells a vehicle flying ``mission`` visits in ``ticks`` ticks of an eastward flow (odour
+    at tick t when ``odour(t)``); every waypoint must be safe."""
+    grid = mission.grid
+    visited = set()
+    for t in range(ticks):
+        obs = Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, odour(t))
+        out = mission.step(obs, vehicle.state)
+        for w in out.waypoints or ():
+            assert_safe_waypoint(grid, w)
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        visited.add(grid.cell_of(vehicle.x, vehicle.y))
+    return visited
+
+
 def test_probes_beyond_an_obstacle_that_blocks_every_upflow_neighbour() -> None:
     # the estimate is the vehicle's own cell, against the downflow face of a wall, and the map's
     # rival lies upflow beyond the wall: only a look beyond the wall tells them apart, so the
@@ -533,16 +550,7 @@ def test_probes_beyond_an_obstacle_that_blocks_every_upflow_neighbour() -> None:
     pi.flat[grid.cell_of(32.5, 2.5)] = 0.45
     mapper.set(pi)
     mission = Mission(grid, mapper, PlanningConfig(), NEVER)
-    vehicle = Vehicle(*grid.centre(here))
-    visited = set()
-    for t in range(30):
-        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, True), vehicle.state)
-        if out.waypoints is not None:
-            for w in out.waypoints:
-                assert_safe_waypoint(grid, w)
-        vehicle.follow(out.waypoints)
-        vehicle.move()
-        visited.add(grid.cell_of(vehicle.x, vehicle.y))
+    visited = fly(mission, Vehicle(*grid.centre(here)), ticks=30, odour=lambda t: True)
     assert beyond in visited
 
 
@@ -557,16 +565,8 @@ def test_an_estimate_inside_an_obstacle_is_probed_upflow_beyond_it() -> None:
     mapper = ScriptedMapper(grid)
     mapper.peak_at(inside)
     mission = Mission(grid, mapper, PlanningConfig(), NEVER)
-    vehicle = Vehicle(52.5, 7.5)  # beside the wall, the free cell nearest the estimate
-    visited = set()
-    for t in range(40):
-        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, t == 0), vehicle.state)
-        if out.waypoints is not None:
-            for w in out.waypoints:
-                assert_safe_waypoint(grid, w)
-        vehicle.follow(out.waypoints)
-        vehicle.move()
-        visited.add(grid.cell_of(vehicle.x, vehicle.y))
+    beside = Vehicle(52.5, 7.5)  # beside the wall, the free cell nearest the estimate
+    visited = fly(mission, beside, ticks=40, odour=lambda t: t == 0)
     assert beyond in visited
 
 
