@@ -149,11 +149,8 @@ class EstimateProbe:
             # would turn back at the first step off it, so the probe is flown until reached
             return routing.to_cell(ctx, self.detour)
         self.detour = None
-        if self.beyond is not None:
-            wanted = self.beyond.follow(ctx, routing) if self.grid.obstacle_mask.flat[ctx.goal] else None
-            if wanted is not None:
-                return wanted
-            self.beyond = None
+        if (wanted := self._follow_beyond(ctx, routing)) is not None:
+            return wanted
         last, self._last = self._last, (ctx.vehicle.x, ctx.vehicle.y)
         self.stopped_short = False
         if self.pass_target is not None:
@@ -179,10 +176,8 @@ class EstimateProbe:
         reachable = routing.reach.reachable(ctx.cell)
         if self.grid.obstacle_mask.flat[ctx.goal]:
             self.beyond = self._pass_beyond(ctx.goal, frame, reachable)
-            wanted = None if self.beyond is None else self.beyond.follow(ctx, routing)
-            if wanted is not None:
+            if (wanted := self._follow_beyond(ctx, routing)) is not None:
                 return wanted
-            self.beyond = None
         probe = self._informative(ctx, self._upflow_beyond(ctx.cell, frame, reachable))
         if probe is None:
             return None
@@ -249,6 +244,16 @@ class EstimateProbe:
 
         point = upflow_until(grid, *grid.centre(cell), frame, 0.0, beyond)
         return None if point is None else grid.cell_of(*point)
+
+    def _follow_beyond(self, ctx: PlanContext, routing: Routing) -> tuple[Waypoint, ...] | None:
+        """The pass beyond an obstacle's next waypoints while the estimate stays in an obstacle;
+        None (and the pass dropped) once it is flown, the estimate has left or there is none."""
+        wanted = None
+        if self.beyond is not None and self.grid.obstacle_mask.flat[ctx.goal]:
+            wanted = self.beyond.follow(ctx, routing)
+        if wanted is None:
+            self.beyond = None
+        return wanted
 
     def _pass_beyond(self, estimate: int, frame: FlowFrame, reachable: BoolArray) -> Pattern | None:
         """The pass across the flow at the first reachable point upflow of the obstacle that holds
