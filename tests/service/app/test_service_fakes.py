@@ -171,6 +171,16 @@ def guided_service(config: Config, edges: Edges) -> Service:
     return service
 
 
+def beside_the_wang_obstacle() -> tuple[FakeLink, FakeRecorder, Edges, Service]:
+    """A commanding service (``guided_service``) in an area with the wang scenarios' obstacle,
+    told of a vehicle at (60, 3), just east of it."""
+    config = build_config({"area": {"obstacles": [[36.25, 0.25, 56.25, 7.75]]}})
+    link, _, recorder, edges = fakes()
+    service = guided_service(config, edges)
+    service.search.add_position(0.5, 60.0, 3.0)
+    return link, recorder, edges, service
+
+
 def test_the_service_maps_publishes_records_and_commands_over_fake_edges() -> None:
     link, maps, recorder, edges = fakes()
 
@@ -264,11 +274,8 @@ def test_a_link_that_closes_ends_the_run() -> None:
 def test_a_target_beside_an_obstacle_goes_out_where_the_mission_planned_it() -> None:
     # the mission plans on 1.25 m model cells; the obstacle ends at x = 56.25 m, halfway across the
     # area's 2.5 m cell 55-57.5 m: (57.1, 3) is free on the mission's grid and must be sent
-    config = build_config({"area": {"obstacles": [[36.25, 0.25, 56.25, 7.75]]}})
-    link, _, recorder, edges = fakes()
-    service = guided_service(config, edges)
+    link, recorder, edges, service = beside_the_wang_obstacle()
     search = service.search
-    search.add_position(0.5, 60.0, 3.0)
     # the mission's plan, staged: its planners never plan into an obstacle, and the service's own
     # check is the last line of defence
     search._plan = (Waypoint(57.1, 3.0),)
@@ -285,11 +292,8 @@ def test_a_target_beside_an_obstacle_goes_out_where_the_mission_planned_it() -> 
 
 
 def test_commanding_resumes_when_the_mission_plans_again_after_a_refusal() -> None:
-    config = build_config({"area": {"obstacles": [[36.25, 0.25, 56.25, 7.75]]}})
-    link, _, _, edges = fakes()
-    service = guided_service(config, edges)
+    link, _, edges, service = beside_the_wang_obstacle()
     search = service.search
-    search.add_position(0.5, 60.0, 3.0)
     search._plan = (Waypoint(56.0, 3.0),)  # staged inside the obstacle: refused
     assert not service._command(edges, 0.5)
     assert service.target is None
