@@ -222,10 +222,13 @@ class Grid:
         return any(x0 <= x <= x1 and y0 <= y <= y1 for x0, y0, x1, y1 in self.obstacles)
 
 
-MODEL_CELL_M = 2.0
-"""Largest side of the cells the search models the source in, m: about the width of a plume a few
-metres from its source. In cells much wider than the plume a vehicle standing upflow of the source
-but inside its cell misses odour the model promised there, and the map cannot hold the source."""
+MODEL_CELL_M = 1.0
+"""Largest side of the cells the search models the source in, m (until the cell budget stops the
+splitting: 1.25 x 1 m on the default area): about the width of a plume a few metres from its
+source. In cells much wider than the plume a vehicle standing upflow of the source but inside its
+cell misses odour the model promised there, and the map cannot hold the source; in cells as wide
+as the detector's footprint a source on the boundary of two cells leaves a vehicle at either
+centre beside the plume (docs/search-benchmark.md, steps 4 and 22)."""
 MODEL_CELLS_MAX = 10_000
 """The model grid is split no further than this many cells (``oslim bench mapping``'s target size)."""
 

@@ -36,8 +36,8 @@ def test_the_readme_example_runs_and_finds_the_toy_source(tmp_path: Path) -> Non
     result = subprocess.run(
         [sys.executable, str(script)], capture_output=True, text=True, check=True, cwd=tmp_path, timeout=120
     )
-    # the toy source (20, 0) lies in the model cell centred on (20.625, -1); 3 m + a 1.2 m half-diagonal
-    assert result.stdout.startswith("declared: (20.6, -1.0) ± 4.2 m after "), result.stdout + result.stderr
+    # the toy source (20, 0) lies in the model cell centred on (20.625, -0.5); 3 m + a 0.8 m half-diagonal
+    assert result.stdout.startswith("declared: (20.6, -0.5) ± 3.8 m after "), result.stdout + result.stderr
     # and the README says what it prints
     assert result.stdout.strip() in README.read_text(encoding="utf-8")
 

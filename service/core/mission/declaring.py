@@ -51,9 +51,11 @@ STOPPED_M = 0.05
 """A vehicle that moved less than this in a tick has stopped (an autopilot inside its acceptance radius)."""
 
 
-PROBE_REACH = 2
+PROBE_REACH = 3
 """The probe at the estimate chooses among the cells within this many rows and columns of the
-vehicle's (a tick or two away), and the first free cell upflow beyond an obstacle."""
+vehicle's (a few ticks away: 3.75 x 3 m on the default area's 1.25 x 1 m model cells), and the
+first free cell upflow beyond an obstacle. Two such cells kept a vehicle in a sparse plume probing
+within 2 m of a false end, which its upflow check then missed (docs/search-benchmark.md, step 22)."""
 
 
 @dataclass
@@ -183,7 +185,8 @@ class EstimateProbe:
             return None
         row, col = self.grid.row_col(ctx.cell)
         probe_row, probe_col = self.grid.row_col(probe)
-        if max(abs(probe_row - row), abs(probe_col - col)) > PROBE_REACH:
+        far = max(abs(probe_row - row), abs(probe_col - col)) > PROBE_REACH
+        if far or not segment_clear(self.grid, (ctx.vehicle.x, ctx.vehicle.y), self.grid.centre(probe)):
             self.detour = probe
         return routing.to_cell(ctx, probe)
 

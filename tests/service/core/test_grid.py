@@ -82,12 +82,14 @@ def test_invalid_grids() -> None:
         Grid(0.0, float("nan"), 0.0, 1.0, 1, 1)
 
 
-def test_the_model_grid_splits_the_papers_cells_to_at_most_two_metres() -> None:
+def test_the_model_grid_splits_the_papers_cells_to_a_metre_within_its_budget() -> None:
     papers = Grid(0.0, 100.0, -50.0, 50.0, columns=40, rows=25)  # 2.5 m x 4 m
-    assert model_division(papers) == (2, 2)
-    fine = papers.subdivided(2, 2)
-    assert (fine.columns, fine.rows, fine.cell_width_m, fine.cell_height_m) == (80, 50, 1.25, 2.0)
-    assert max(fine.cell_width_m, fine.cell_height_m) <= MODEL_CELL_M
+    # 1.25 x 1 m (8000 cells); 0.83 m columns as well would make 12,000, over the budget
+    assert model_division(papers) == (2, 4)
+    fine = papers.subdivided(2, 4)
+    assert (fine.columns, fine.rows, fine.cell_width_m, fine.cell_height_m) == (80, 100, 1.25, 1.0)
+    assert fine.cell_height_m <= MODEL_CELL_M < fine.cell_width_m
+    assert fine.size <= MODEL_CELLS_MAX < papers.size * 3 * 4
     assert model_division(Grid(0.0, 10.0, 0.0, 10.0, columns=10, rows=10)) == (1, 1)  # 1 m cells stay
 
 
