@@ -156,9 +156,10 @@ class DeclarationConfig(_Section):
     (along the mean flow, within ``visit_radius_m`` across it) since it became the estimate, m
     (0: off). Bayesian mappers only: the hmm's estimate mostly sits in the vehicle's own cell and
     moves with it, so it is seldom passed (farrell2003, hmm + astar, 100 runs: 45 % -> 32 %)."""
-    check_width_m: float = Field(default=8.0, ge=0)
+    check_width_m: float = Field(default=6.0, ge=0)
     """Before naming a cell, cross the flow ``check_upflow_m`` upflow of its centre, this far to
-    either side, m (0: off); odour found upflow there calls the declaration off."""
+    either side and back to its line, m (0: off); odour found upflow there calls the declaration
+    off."""
     persist_s: float = Field(default=10.0, ge=0)
     """No rule fires until odour has been detected within ``visit_radius_m`` of the estimate at
     two times at least this far apart, s (0: off). Bayesian mappers only, like the upflow pass it

@@ -61,9 +61,9 @@ within 2 m of a false end, which its upflow check then missed (docs/search-bench
 @dataclass
 class Check:
     """The upflow check of the cell where a rule fired (``found``): a cross-flow pass
-    ``check_upflow_m`` upflow of its centre (``pattern``). Odour ``cancel_upflow_m`` or more
-    upflow of the centre, or another estimated cell, calls it off. ``done``: the pass is flown,
-    the cell is declared at the next tick."""
+    ``check_upflow_m`` upflow of its centre that crosses the centre's line twice (``pattern``).
+    Odour ``cancel_upflow_m`` or more upflow of the centre, or another estimated cell, calls it
+    off. ``done``: the pass is flown, the cell is declared at the next tick."""
 
     found: Declaration
     frame: FlowFrame
@@ -73,13 +73,21 @@ class Check:
 
     @classmethod
     def across(cls, grid: Grid, found: Declaration, frame: FlowFrame, config: DeclarationConfig) -> Check:
-        """Two legs ``check_width_m`` to each side across the flow, ``check_upflow_m`` upflow; or,
-        when that point lies in an obstacle, just upflow of the obstacle: a plume that crosses the
-        obstacle cannot be met beside it, only beyond it."""
+        """Legs ``check_width_m`` to each side across the flow, ``check_upflow_m`` upflow, and back
+        to the centre's line; or, when that point lies in an obstacle, just upflow of the obstacle:
+        a plume that crosses the obstacle cannot be met beside it, only beyond it.
+
+        The way back is a second crossing of the line: a sparse plume lies under a crossing vehicle
+        for a few ticks only, and one crossing of a plume present in 40 % of the seconds misses it
+        in 3 ticks one time in five (docs/search-benchmark.md, step 23)."""
         upflow = config.check_upflow_m
         clear = upflow_until(grid, found.x, found.y, frame, upflow, lambda x, y: not grid.in_obstacle(x, y))
         ax, ay = clear if clear is not None else (found.x - upflow * frame.ux, found.y - upflow * frame.uy)
         legs = pass_across(grid, ax, ay, frame, config.check_width_m)
+        if len(legs) == 2:
+            low, high = sorted(frame.cross(end.x, end.y) for end in legs)
+            line = min(max(frame.cross(ax, ay), low), high)
+            legs = (*legs, frame.point(frame.along(legs[-1].x, legs[-1].y), line))
         return cls(found, frame, 0.5 * upflow, Pattern(legs))
 
     @property

@@ -628,8 +628,9 @@ def test_the_upflow_check_crosses_the_flow_upflow_of_the_estimate_before_declari
     assert out.waypoints is not None
     out, visited = fly_dry_until_declared(mission, vehicle, out, range(1, 10))
     assert out.state is MissionState.DECLARED
-    # flow East: 3 m West of the centre, 6 m to one side, then the other; declared there
-    assert visited == [(sx - 3.0, sy + 6.0), (sx - 3.0, sy - 6.0), (sx - 3.0, sy - 6.0)]
+    # flow East: 3 m West of the centre, 6 m to one side, then the other, then back to the
+    # estimate's line (a second crossing of it); declared there
+    assert visited == [(sx - 3.0, sy + 6.0), (sx - 3.0, sy - 6.0), (sx - 3.0, sy), (sx - 3.0, sy)]
     (declared,) = out.events
     assert isinstance(declared, SourceDeclared)
     assert (declared.x, declared.y) == (sx, sy)
@@ -649,7 +650,7 @@ def test_odour_upflow_of_the_estimate_calls_the_check_off() -> None:
     assert out.events == ()
     out, visited = fly_dry_until_declared(mission, vehicle, out, range(2, 12))
     assert out.state is MissionState.DECLARED
-    assert visited[-2:] == [(sx - 3.0, sy - 6.0)] * 2  # the far side of the new check, then declared
+    assert visited[-2:] == [(sx - 3.0, sy)] * 2  # back on the line at the new check's end, then declared
 
 
 def test_the_checks_tally_survives_a_restart() -> None:

@@ -51,9 +51,13 @@ def found_at_source() -> Declaration:
 # -- the check ----------------------------------------------------------------------------------
 
 
-def test_the_check_crosses_the_flow_upflow_of_the_cell() -> None:
+def test_the_check_crosses_the_flow_upflow_of_the_cell_and_comes_back_to_its_line() -> None:
     check = Check.across(AREA, found_at_source(), EAST, CONFIG)
-    assert check.pattern.vertices == (Waypoint(SX - 3.0, SY + 6.0), Waypoint(SX - 3.0, SY - 6.0))
+    assert check.pattern.vertices == (
+        Waypoint(SX - 3.0, SY + 6.0),
+        Waypoint(SX - 3.0, SY - 6.0),
+        Waypoint(SX - 3.0, SY),
+    )
     assert check.cancel_upflow_m == 1.5
 
 
@@ -63,10 +67,10 @@ def test_a_check_whose_line_lies_in_an_obstacle_crosses_the_flow_just_upflow_of_
     walled = Grid(0.0, 100.0, -50.0, 50.0, columns=20, rows=20, obstacles=((9.0, -10.0, 20.0, 10.0),))
     found = Declaration(0.0, SOURCE, walled.paper_number(SOURCE), SX, SY, 0.9, 0.9)
     check = Check.across(walled, found, EAST, CONFIG)
-    (first, second) = check.pattern.vertices
-    assert first.x == second.x
+    (first, second, back) = check.pattern.vertices
+    assert first.x == second.x == back.x
     assert 6.5 <= first.x < 9.0  # within a step (half a 5 m cell) of the wall's upflow face
-    assert (first.y, second.y) == (SY + 6.0, SY - 6.0)
+    assert (first.y, second.y, back.y) == (SY + 6.0, SY - 6.0, SY)
     assert check.cancel_upflow_m == 1.5  # odour 1.5 m upflow of the estimate still calls it off
 
 
@@ -84,7 +88,9 @@ def test_the_check_is_done_when_its_legs_are_flown_and_holds_there() -> None:
     assert check.waypoints(ctx_at(SX, SY), ROUTING) == (Waypoint(SX - 3.0, SY + 6.0),)
     assert not check.done
     assert check.waypoints(ctx_at(SX - 3.0, SY + 6.0), ROUTING) == (Waypoint(SX - 3.0, SY - 6.0),)
-    assert check.waypoints(ctx_at(SX - 3.0, SY - 6.0), ROUTING) == (Waypoint(SX - 3.0, SY - 6.0),)
+    assert check.waypoints(ctx_at(SX - 3.0, SY - 6.0), ROUTING) == (Waypoint(SX - 3.0, SY),)
+    assert not check.done
+    assert check.waypoints(ctx_at(SX - 3.0, SY), ROUTING) == (Waypoint(SX - 3.0, SY),)
     assert check.done
 
 
