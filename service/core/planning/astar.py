@@ -6,7 +6,12 @@ variants, both registered as planners:
 ``astar`` (the default) never enters an obstacle: the 8 compass moves of ``moves.py`` without
 corner cutting, each costing the distance between cell centres in metres, and the octile
 distance as heuristic. The octile distance is the exact cost in the obstacle-free grid, so it
-is consistent and the path returned is a shortest admissible one.
+is consistent and the path returned is a shortest admissible one. Where no obstacle lies between
+the vehicle and the estimate's centre the planner flies that straight leg instead: it is the
+shortest way in the plane, and the grid's shortest paths are staircases that may put all their
+diagonal moves first (a diagonal runs 39 degrees off the x axis on the default area's 1.25 x 1 m
+model cells), so that a vehicle re-planning toward an estimate upflow first drifts across the
+flow, out of the plume (docs/search-benchmark.md, steps 21 and 24).
 
 ``astar-paper`` is the paper's own: a node is a cell entered with a heading, and from it only
 the five moves relative to that heading (left, left-forward, forward, right-forward, right) are
@@ -28,6 +33,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
 from service.core.errors import NoPathError
+from service.core.planning.base import Plan, Waypoint
 from service.core.planning.follow import PathFollower
 from service.core.planning.moves import (
     COMPASS,
@@ -37,6 +43,7 @@ from service.core.planning.moves import (
     sector_between,
     step,
 )
+from service.core.planning.safety import segment_clear
 
 if TYPE_CHECKING:
     from service.core.grid import Grid
@@ -186,9 +193,18 @@ def astar_paper(
 
 
 class AStarPlanner(PathFollower):
-    """``astar``: the obstacle-free 8-connected A* to the estimate, re-planned when it changes."""
+    """``astar``: the straight leg to the estimate's centre when it is clear of obstacles, else the
+    obstacle-free 8-connected A* to it, re-planned when the estimate changes."""
 
     name: ClassVar[str] = "astar"
+
+    def plan(self, ctx: PlanContext) -> Plan:
+        if ctx.goal != ctx.cell and not self.blocked.flat[ctx.goal]:
+            x, y = self.grid.centre(ctx.goal)
+            if segment_clear(self.grid, (ctx.vehicle.x, ctx.vehicle.y), (x, y)):
+                self.forget()
+                return Plan((Waypoint(x, y),), (ctx.goal,))
+        return super().plan(ctx)
 
     def compute(self, ctx: PlanContext) -> list[int]:
         return astar(self.grid, ctx.cell, ctx.goal, self.blocked)

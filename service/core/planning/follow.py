@@ -43,6 +43,12 @@ class PathFollower(ABC):
         self._index = index
         return Plan.along(self.grid, self._path[index:])
 
+    def forget(self) -> None:
+        """Drop the path being followed: the next ``plan`` computes a new one."""
+        self._goal = None
+        self._path = []
+        self._index = 0
+
     def _progress(self, cell: int) -> int | None:
         """Where the vehicle's cell is on the path, searching forward from the last position."""
         try:

@@ -9,7 +9,8 @@ from service.core.errors import NoPathError
 from service.core.grid import Grid
 from service.core.mapping.hmm import HmmMapper
 from service.core.planning.astar import AStarPlanner, PaperAStarPlanner, astar, astar_paper
-from service.core.planning.base import PlanContext, VehicleState
+from service.core.planning.base import PlanContext, VehicleState, Waypoint
+from service.core.planning.safety import segment_clear
 
 # Independent references: plain Bellman-Ford relaxation written out here, not the package's tables.
 STEPS = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
@@ -271,7 +272,8 @@ def context(g: Grid, x: float, y: float, goal: int, heading: float = 0.0) -> Pla
 
 
 def test_astar_planner_replans_only_when_the_estimate_changes() -> None:
-    g, _ = grid_with(["......"] * 4)
+    # a block between the vehicle and every goal below, so that no straight leg is clear
+    g, _ = grid_with(["......", "..##..", "..##..", "......"])
     planner = AStarPlanner(g, PlanningConfig())
     goal = g.cell_of(5.5, 3.5)
     first = planner.plan(context(g, 0.5, 0.5, goal))
@@ -283,12 +285,34 @@ def test_astar_planner_replans_only_when_the_estimate_changes() -> None:
     assert planner.replans == 1
     assert second.cells == first.cells[1:]
     # the estimate moves: a new search
-    third = planner.plan(context(g, x, y, g.cell_of(0.5, 3.5)))
+    moved = g.cell_of(4.5, 3.5)
+    third = planner.plan(context(g, x, y, moved))
     assert planner.replans == 2
-    assert third.cells[-1] == g.cell_of(0.5, 3.5)
+    assert third.cells[-1] == moved
     # the vehicle strays off the path: a new search
-    planner.plan(context(g, 5.5, 0.5, g.cell_of(0.5, 3.5)))
+    off = next((px, py) for px, py in ((0.5, 1.5), (1.5, 0.5)) if g.cell_of(px, py) not in third.cells)
+    planner.plan(context(g, *off, moved))
     assert planner.replans == 3
+
+
+def test_astar_planner_flies_a_clear_straight_leg_to_the_estimate() -> None:
+    # on 1.25 x 2 m cells the grid's shortest path to a goal 30 m east and 8 m north may take its
+    # four diagonal moves first, 58 degrees off the line; a clear leg is flown straight instead
+    g = Grid(0.0, 40.0, 0.0, 20.0, columns=32, rows=10)
+    planner = AStarPlanner(g, PlanningConfig())
+    goal = g.cell_of(31.0, 9.0)
+    plan = planner.plan(context(g, 1.0, 1.0, goal))
+    assert plan.waypoints == (Waypoint(*g.centre(goal)),)
+    assert plan.cells == (goal,)
+    assert planner.replans == 0
+    # an obstacle on that leg: the grid path round it, no leg across the obstacle
+    walled = Grid(0.0, 40.0, 0.0, 20.0, columns=32, rows=10, obstacles=((14.0, 0.0, 16.0, 12.0),))
+    planner = AStarPlanner(walled, PlanningConfig())
+    plan = planner.plan(context(walled, 1.0, 1.0, goal))
+    assert planner.replans == 1
+    assert plan.cells[-1] == goal
+    points = [(1.0, 1.0), *((w.x, w.y) for w in plan.waypoints)]
+    assert all(segment_clear(walled, a, b) for a, b in itertools.pairwise(points))
 
 
 def test_waypoints_are_cell_centres_and_a_reached_goal_holds_there() -> None:
