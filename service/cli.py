@@ -54,6 +54,17 @@ def _non_negative(text: str) -> float:
 _non_negative.__name__ = "number"
 
 
+def _positive(text: str) -> float:
+    """An argparse type: a finite number > 0 (a factor)."""
+    value = float(text)
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return value
+
+
+_positive.__name__ = "number"
+
+
 def _add_overrides(parser: argparse.ArgumentParser, metavar: str, text: str, dest: str = "set") -> None:
     parser.add_argument("--set", action="append", default=[], dest=dest, metavar=metavar, help=text)
 
@@ -343,6 +354,14 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="M",
         help="every simulated vehicle stops M m short of its targets, as ArduPilot Rover does within "
         "WP_RADIUS (2 m by default); default 0: they drive onto them",
+    )
+    w.add_argument(
+        "--time-scale",
+        type=_positive,
+        default=1.0,
+        metavar="K",
+        help="a diagnostic, not a result: every class's time limit times K (with K = 2, the failures "
+        "that succeed were slow, the others stuck); default 1: the suite",
     )
 
     r = kinds.add_parser(

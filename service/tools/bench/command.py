@@ -56,6 +56,7 @@ def _run_mapping(args: argparse.Namespace) -> int:
 
 
 ORACLE = "; ORACLE declaration (a perfect guard: a bound, not a result)"
+TIME_SCALE = "; TIME LIMITS x {:g} (a diagnostic, not the suite's result)"
 
 
 def _print_json(row: dict[str, Any], oracle: bool) -> None:
@@ -251,7 +252,9 @@ def _run_suite(args: argparse.Namespace) -> int:
     if not args.json:
         print(
             f"suite {args.suite or 'config/suites'}: {_missions(args, files)}; "
-            "times: median / p90 to a correct declaration" + (ORACLE if args.oracle_declaration else ""),
+            "times: median / p90 to a correct declaration"
+            + (ORACLE if args.oracle_declaration else "")
+            + (TIME_SCALE.format(args.time_scale) if args.time_scale != 1.0 else ""),
             flush=True,
         )
         print(suite.HEADER, flush=True)
@@ -261,10 +264,12 @@ def _run_suite(args: argparse.Namespace) -> int:
                 files, args.runs, first_seed=args.first_seed, config_path=args.config,
                 overrides=args.overrides, jobs=args.jobs, scheduler=args.scheduler, progress=progress,
                 oracle=args.oracle_declaration, arrival_radius_m=args.arrival_radius,
+                time_scale=args.time_scale,
             )
         ):  # fmt: skip
             if args.json:
-                _print_json(row.as_row(), args.oracle_declaration)
+                scaled = {"time_scale": args.time_scale} if args.time_scale != 1.0 else {}
+                _print_json({**row.as_row(), **scaled}, args.oracle_declaration)
             else:
                 print(row.line(), flush=True)
     return 0

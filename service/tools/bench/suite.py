@@ -62,6 +62,9 @@ class SuiteMission:
     arrival_radius_m: float = 0.0
     """The simulated vehicle stops this far short of its targets (ArduPilot Rover's WP_RADIUS);
     0: it drives onto them, as every class draws it."""
+    time_scale: float = 1.0
+    """The class's time limit times this: a diagnostic (are the failures slow, or stuck?), not a
+    result; 1 is the suite."""
 
 
 @lru_cache(maxsize=64)
@@ -97,9 +100,9 @@ def source_and_flow(drawn: DrawnWorld, seed: int) -> tuple[tuple[float, float], 
 
 
 def run_suite_mission(spec: SuiteMission) -> tuple[MissionResult, float]:
-    """The mission and its time limit (a worker's task)."""
+    """The mission and its time limit, scaled by ``spec.time_scale`` (a worker's task)."""
     drawn = drawn_world(spec)
-    limit = drawn.time_limit_s
+    limit = drawn.time_limit_s * spec.time_scale
     return run_mission(drawn.scenario, spec.seed, max_time_s=limit, oracle=spec.oracle), limit
 
 
@@ -303,14 +306,18 @@ def run_suite(
     progress: Progress = lambda _: None,
     oracle: bool = False,
     arrival_radius_m: float = 0.0,
+    time_scale: float = 1.0,
 ) -> Iterator[ClassSummary]:
     """Every class over seeds first_seed..first_seed+runs-1; yields each class's summary in order.
 
     ``scheduler``: a Dask scheduler address (or a ``distributed.Client``) to run the missions on;
     None runs them in ``jobs`` local processes (default: the cores). ``oracle``: every mission with
     the perfect declaration guard (``run_mission``), a bound on what the guards cost.
-    ``arrival_radius_m``: every vehicle stops this far short of its targets."""
-    batches = class_missions(class_files, runs, first_seed, config_path, overrides, oracle, arrival_radius_m)
+    ``arrival_radius_m``: every vehicle stops this far short of its targets. ``time_scale``: every
+    class's time limit times this (a diagnostic)."""
+    batches = class_missions(
+        class_files, runs, first_seed, config_path, overrides, oracle, arrival_radius_m, time_scale
+    )
     specs = [spec for _, batch in batches for spec in batch]
     if scheduler is not None:
         outcomes = _dask(specs, scheduler, progress)
@@ -328,11 +335,14 @@ def class_missions(
     overrides: Sequence[str],
     oracle: bool = False,
     arrival_radius_m: float = 0.0,
+    time_scale: float = 1.0,
 ) -> list[tuple[str, list[SuiteMission]]]:
     """Each class's name and its missions over seeds first_seed..first_seed+runs-1. A broken
     configuration, or a class that cannot draw its first world with it, fails here, once."""
     if runs < 1:
         raise ValueError("runs must be >= 1")
+    if not (math.isfinite(time_scale) and time_scale > 0):
+        raise ValueError("time_scale must be a positive number")
     config = service_config(config_path, tuple(overrides))
     classes = [_world_class(str(path)) for path in class_files]
     for c in classes:
@@ -341,7 +351,7 @@ def class_missions(
     keys = tuple(overrides)
 
     def mission(c: WorldClass, seed: int) -> SuiteMission:
-        return SuiteMission(c.origin, seed, config_path, keys, oracle, arrival_radius_m)
+        return SuiteMission(c.origin, seed, config_path, keys, oracle, arrival_radius_m, time_scale)
 
     return [(c.name, [mission(c, seed) for seed in seeds]) for c in classes]
 

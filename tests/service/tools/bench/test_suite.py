@@ -160,3 +160,25 @@ def test_an_arrival_radius_makes_every_vehicle_stop_short_and_changes_nothing_el
     world, vehicle = short.scenario.world, plain.scenario.world.vehicle
     assert world.model_copy(update={"vehicle": vehicle}) == plain.scenario.world
     assert (short.scenario.config, short.time_limit_s) == (plain.scenario.config, plain.time_limit_s)
+
+
+def test_a_time_scale_stretches_every_limit_and_says_it_is_a_diagnostic(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    steady = next(str(path) for path in suite.suite_classes() if path.stem == "steady")
+    limit = suite.drawn_world(suite.SuiteMission(steady, 0)).time_limit_s
+    result, scaled = suite.run_suite_mission(suite.SuiteMission(steady, 0, time_scale=0.05))
+    assert scaled == pytest.approx(0.05 * limit)
+    assert not result.declared  # a few seconds: no plume finder reaches the plume and declares
+    assert result.time_s <= scaled + 1.0
+    command = ["bench", "suite", "--class", "steady", "--runs", "1", "--first-seed", "0", "--jobs", "1"]
+    assert main([*command, "--json", "--time-scale", "0.05"]) == 0
+    rows = _rows(capsys)
+    assert rows[0]["max_time_s"] == pytest.approx(0.05 * limit)
+    assert all(row["time_scale"] == 0.05 for row in rows)  # the summary object too
+    assert main([*command, "--time-scale", "0.05"]) == 0
+    assert "TIME LIMITS x 0.05 (a diagnostic" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main([*command, "--time-scale", "0"])
+    with pytest.raises(ValueError, match="time_scale"):
+        suite.class_missions([Path(steady)], 1, 0, None, (), time_scale=float("nan"))
