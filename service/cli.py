@@ -43,26 +43,19 @@ def _at_least(minimum: int) -> Callable[[str], int]:
     return parse
 
 
-def _non_negative(text: str) -> float:
-    """An argparse type: a finite number >= 0 (metres)."""
-    value = float(text)
-    if not (math.isfinite(value) and value >= 0.0):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
-    return value
+def _finite(*, zero: bool) -> Callable[[str], float]:
+    """An argparse type: a finite number above 0, or at least 0 with ``zero`` (a distance), or a
+    usage error naming the bound."""
+    bound = ">= 0" if zero else "> 0"
 
+    def parse(text: str) -> float:
+        value = float(text)
+        if not (math.isfinite(value) and (value >= 0.0 if zero else value > 0.0)):
+            raise argparse.ArgumentTypeError(f"must be a finite number {bound}, got {text}")
+        return value
 
-_non_negative.__name__ = "number"
-
-
-def _positive(text: str) -> float:
-    """An argparse type: a finite number > 0 (a factor)."""
-    value = float(text)
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
-    return value
-
-
-_positive.__name__ = "number"
+    parse.__name__ = "number"  # argparse names the type in "invalid number value"
+    return parse
 
 
 def _add_overrides(parser: argparse.ArgumentParser, metavar: str, text: str, dest: str = "set") -> None:
@@ -349,7 +342,7 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
     )
     w.add_argument(
         "--arrival-radius",
-        type=_non_negative,
+        type=_finite(zero=True),
         default=0.0,
         metavar="M",
         help="every simulated vehicle stops M m short of its targets, as ArduPilot Rover does within "
@@ -357,7 +350,7 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
     )
     w.add_argument(
         "--time-scale",
-        type=_positive,
+        type=_finite(zero=False),
         default=1.0,
         metavar="K",
         help="a diagnostic, not a result: every class's time limit times K (with K = 2, the failures "

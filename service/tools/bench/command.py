@@ -59,9 +59,13 @@ ORACLE = "; ORACLE declaration (a perfect guard: a bound, not a result)"
 TIME_SCALE = "; TIME LIMITS x {:g} (a diagnostic, not the suite's result)"
 
 
-def _print_json(row: dict[str, Any], oracle: bool) -> None:
-    """One JSON object of a search or suite run; a bound under the oracle says so."""
-    print(json.dumps({**row, "oracle_declaration": True} if oracle else row), flush=True)
+def _print_json(row: dict[str, Any], oracle: bool, time_scale: float = 1.0) -> None:
+    """One JSON object of a search or suite run; a bound under the oracle, or a run with scaled
+    time limits, says so."""
+    marks = ({"oracle_declaration": True} if oracle else {}) | (
+        {"time_scale": time_scale} if time_scale != 1.0 else {}
+    )
+    print(json.dumps({**row, **marks}), flush=True)
 
 
 def _fmt(value: float | None, spec: str) -> str:
@@ -268,8 +272,7 @@ def _run_suite(args: argparse.Namespace) -> int:
             )
         ):  # fmt: skip
             if args.json:
-                scaled = {"time_scale": args.time_scale} if args.time_scale != 1.0 else {}
-                _print_json({**row.as_row(), **scaled}, args.oracle_declaration)
+                _print_json(row.as_row(), args.oracle_declaration, args.time_scale)
             else:
                 print(row.line(), flush=True)
     return 0
