@@ -366,6 +366,15 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
     )
     _add_class_run_arguments(e, 'one JSON object per outcome (class "all": the classes together)')
 
+    t = kinds.add_parser(
+        "phases",
+        help="where suite missions' time goes: to the odour, to the source, to the rule, in the check",
+    )
+    _add_class_run_arguments(
+        t,
+        'one JSON object per class, then "all", "rover" and "auv" (the classes with both kinds)',
+    )
+
     p = kinds.add_parser("plume", help="filament plume model: steps per second at a puff count")
     p.add_argument("--puffs", type=int, default=10_000, help="live puffs at steady state (default 10000)")
     p.add_argument("--json", action="store_true", help="one JSON object")

@@ -105,6 +105,12 @@ class Mission:
     def state(self) -> MissionState:
         return self._state
 
+    @property
+    def checking(self) -> bool:
+        """Whether the check across the flow is being flown: the declaration's rule fired and the
+        cell waits for the check to vouch for it."""
+        return self._declaring.check is not None
+
     def save_state(self) -> dict[str, Any]:
         """The phase, detection memory and the checks' tally (for the restart snapshot, as JSON; the
         mapper saves its own)."""

@@ -14,6 +14,7 @@ from sim_bridge.scenarios import load_scenario
 
 if TYPE_CHECKING:
     from service.tools.bench import estimate as estimate_types
+    from service.tools.bench import phases as phases_types
     from service.tools.bench import reliability as reliability_types
 
 
@@ -30,6 +31,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_model(args)
     if args.bench == "estimate":
         return _run_estimate(args)
+    if args.bench == "phases":
+        return _run_phases(args)
     raise AssertionError(args.bench)
 
 
@@ -236,6 +239,53 @@ def _print_outcomes(name: str, outcomes: list[estimate_types.Outcome], as_json: 
             f"{p.away_downflow:>10}{p.away_upflow_or_beside:>11}{p.at_odour:>10}{p.flat:>6}",
             flush=True,
         )
+
+
+PHASES_HEADER = (
+    f"{'group':<16}{'missions':>9}{'correct':>8}{'limit':>7}{'odour':>11}{'-> source':>11}"
+    f"{'-> rule':>11}{'check':>11}{'source -> declared':>20}{'checks':>8}{'check s':>9}"
+)
+
+
+def _run_phases(args: argparse.Namespace) -> int:
+    from service.tools.bench import phases
+
+    batches = _class_batches(
+        args,
+        "phases",
+        "where the time goes: {missions}; medians in s (missions that got there): odour: the first "
+        "detection; -> source: on to within one cell of the source's cell; -> rule: on to the first "
+        "check across the flow begun there (the rule fired); check: the check that vouched for a "
+        "declared cell, begun to flown; checks: begun in all (call-offs begin another), flown for "
+        "check s ticks; rover, auv: the missions of the classes that drew both kinds of vehicle",
+    )
+    if not args.json:
+        print(PHASES_HEADER, flush=True)
+    done: dict[str, list[phases.Phases]] = {}
+    for name, mission in phases.run(batches, args.jobs):
+        done.setdefault(name, []).append(mission)
+        if len(done[name]) == args.runs:
+            _print_summary(phases.summary(name, done[name]), args.json)
+    for group, missions in phases.groups(done):
+        _print_summary(phases.summary(group, missions), args.json)
+    return 0
+
+
+def _print_summary(s: phases_types.Summary, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(s.as_row()), flush=True)
+        return
+
+    def cell(phase: tuple[float | None, int]) -> str:
+        median, count = phase
+        return "-" if median is None else f"{median:.0f} ({count})"
+
+    print(
+        f"{s.group:<16}{s.missions:>9}{s.correct:>8}{s.limit_s:>7.0f}{cell(s.first_odour):>11}"
+        f"{cell(s.to_source):>11}{cell(s.to_rule):>11}{cell(s.vouching):>11}"
+        f"{cell(s.at_source_to_declared):>20}{s.checks:>8}{s.check_ticks:>9}",
+        flush=True,
+    )
 
 
 def _print_bands(name: str, bands: list[reliability_types.Band], as_json: bool) -> None:

@@ -629,6 +629,7 @@ def test_the_upflow_check_crosses_the_flow_upflow_of_the_estimate_before_declari
     _, mission, vehicle, out = start_check()
     sx, sy = AREA.centre(SOURCE)
     assert out.state is MissionState.TRACE  # the rule fires, but the check comes first
+    assert mission.checking
     assert out.waypoints is not None
     out, visited = fly_dry_until_declared(mission, vehicle, out, range(1, 10))
     assert out.state is MissionState.DECLARED
@@ -639,6 +640,7 @@ def test_the_upflow_check_crosses_the_flow_upflow_of_the_estimate_before_declari
     assert isinstance(declared, SourceDeclared)
     assert (declared.x, declared.y) == (sx, sy)
     assert declared.check is CrossCheck.FLOWN
+    assert not mission.checking  # flown: the check is over
 
 
 def test_odour_upflow_of_the_estimate_calls_the_check_off() -> None:
