@@ -5,9 +5,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any
 
 from service.tools.bench import mapping, search, suite
 from service.tools.progress import progress_bar
@@ -17,9 +16,6 @@ if TYPE_CHECKING:
     from service.tools.bench import estimate as estimate_types
     from service.tools.bench import phases as phases_types
     from service.tools.bench import reliability as reliability_types
-
-
-T = TypeVar("T")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -203,19 +199,6 @@ def _run_model(args: argparse.Namespace) -> int:
     return 0
 
 
-def _by_class(
-    results: Iterable[tuple[str, T]], runs: int, whole: Callable[[str, list[T]], None]
-) -> dict[str, list[T]]:
-    """``results`` (class, item) grouped by class, ``whole`` told of each class once its ``runs``
-    items are in (the diagnostics print a class as soon as it is done)."""
-    grouped: dict[str, list[T]] = {}
-    for name, item in results:
-        grouped.setdefault(name, []).append(item)
-        if len(grouped[name]) == runs:
-            whole(name, grouped[name])
-    return grouped
-
-
 ESTIMATE_HEADER = (
     f"{'class':<16}{'outcome':<22}{'missions':>9}{'traced':>8}{'at source':>11}{'+ mass':>8}"
     f"{'downflow':>10}{'up/beside':>11}{'at odour':>10}{'flat':>6}"
@@ -235,11 +218,10 @@ def _run_estimate(args: argparse.Namespace) -> int:
     )
     if not args.json:
         print(ESTIMATE_HEADER, flush=True)
-    ended = _by_class(
-        ((name, (outcome, places)) for name, outcome, places in estimate.run(batches, args.jobs)),
-        args.runs,
-        lambda name, runs: _print_outcomes(name, estimate.outcomes(runs), args.json),
-    )
+    ended: dict[str, list[tuple[str, estimate.Places]]] = {}
+    for name, runs in estimate.run(batches, args.jobs):
+        ended[name] = runs
+        _print_outcomes(name, estimate.outcomes(runs), args.json)
     if len(ended) > 1:
         _print_outcomes("all", estimate.outcomes([e for runs in ended.values() for e in runs]), args.json)
     return 0
@@ -278,11 +260,10 @@ def _run_phases(args: argparse.Namespace) -> int:
     )
     if not args.json:
         print(PHASES_HEADER, flush=True)
-    done = _by_class(
-        phases.run(batches, args.jobs),
-        args.runs,
-        lambda name, runs: _print_summary(phases.summary(name, runs), args.json),
-    )
+    done: dict[str, list[phases.Phases]] = {}
+    for name, runs in phases.run(batches, args.jobs):
+        done[name] = runs
+        _print_summary(phases.summary(name, runs), args.json)
     for group, missions in phases.groups(done):
         _print_summary(phases.summary(group, missions), args.json)
     return 0

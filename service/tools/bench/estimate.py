@@ -26,7 +26,7 @@ from service.core.mission.events import MissionState
 from service.core.planning.declaration import mass_within
 from service.tools.bench.search import run_mission, within_one_cell
 from service.tools.bench.suite import SuiteMission, drawn_world, source_and_flow
-from service.tools.bench.workers import in_order
+from service.tools.bench.workers import in_order_by_batch
 
 AT_ODOUR_M = 5.0
 """An estimate this close to a detection of the mission counts as placed at the odour."""
@@ -115,9 +115,7 @@ def outcomes(ended: Sequence[tuple[str, Places]]) -> list[Outcome]:
 
 def run(
     batches: Sequence[tuple[str, list[SuiteMission]]], jobs: int | None = None
-) -> Iterator[tuple[str, str, Places]]:
-    """(class, outcome, places) of every mission of ``batches`` (``suite.class_missions``), in order."""
-    specs = [(name, spec) for name, batch in batches for spec in batch]
-    ended = in_order(mission_places, [spec for _, spec in specs], jobs)
-    for (name, _), (outcome, places) in zip(specs, ended, strict=True):
-        yield name, outcome, places
+) -> Iterator[tuple[str, list[tuple[str, Places]]]]:
+    """(class, (outcome, places) of each of its missions) for each class of ``batches``
+    (``suite.class_missions``), in order."""
+    return in_order_by_batch(mission_places, batches, jobs)

@@ -18,7 +18,7 @@ from typing import Any
 from service.api import Search, Step
 from service.tools.bench.search import run_mission
 from service.tools.bench.suite import SuiteMission, drawn_world
-from service.tools.bench.workers import in_order
+from service.tools.bench.workers import in_order_by_batch
 
 
 @dataclass(frozen=True)
@@ -161,8 +161,7 @@ def groups(by_class: dict[str, list[Phases]]) -> list[tuple[str, list[Phases]]]:
 
 def run(
     batches: Sequence[tuple[str, list[SuiteMission]]], jobs: int | None = None
-) -> Iterator[tuple[str, Phases]]:
-    """(class, phases) of every mission of ``batches`` (``suite.class_missions``), in order."""
-    specs = [(name, spec) for name, batch in batches for spec in batch]
-    for (name, _), phases in zip(specs, in_order(mission_phases, [s for _, s in specs], jobs), strict=True):
-        yield name, phases
+) -> Iterator[tuple[str, list[Phases]]]:
+    """(class, the phases of each of its missions) for each class of ``batches``
+    (``suite.class_missions``), in order."""
+    return in_order_by_batch(mission_phases, batches, jobs)

@@ -22,7 +22,7 @@ import numpy.typing as npt
 from service.api import Search, Step
 from service.tools.bench.search import run_mission
 from service.tools.bench.suite import SuiteMission, drawn_world, source_and_flow
-from service.tools.bench.workers import in_order
+from service.tools.bench.workers import in_order_by_batch
 
 ON_LINE_M = 2.0
 """A tick counts as on the source's flow line when the vehicle is at most this far across it."""
@@ -110,6 +110,5 @@ def run(
     batches: Sequence[tuple[str, list[SuiteMission]]], jobs: int | None = None
 ) -> Iterator[tuple[str, Ticks]]:
     """Each class's ticks over its missions (``suite.class_missions``), in order."""
-    ticks = in_order(mission_ticks, [spec for _, batch in batches for spec in batch], jobs)
-    for name, batch in batches:
-        yield name, Ticks.join([next(ticks) for _ in batch])
+    for name, ticks in in_order_by_batch(mission_ticks, batches, jobs):
+        yield name, Ticks.join(ticks)

@@ -58,3 +58,13 @@ def in_order(
             futures.append(future)
         for future in futures:
             yield future.result()
+
+
+def in_order_by_batch(
+    task: Callable[[T], R], batches: Sequence[tuple[str, Sequence[T]]], jobs: int | None = None
+) -> Iterator[tuple[str, list[R]]]:
+    """(name, ``task`` of each of its items) for each named batch, in order, each as soon as its
+    items are done; every item of every batch goes to one ``in_order`` run."""
+    results = in_order(task, [item for _, batch in batches for item in batch], jobs)
+    for name, batch in batches:
+        yield name, [next(results) for _ in batch]

@@ -5,7 +5,7 @@ import os
 import pytest
 from threadpoolctl import threadpool_info
 
-from service.tools.bench.workers import worker_pool
+from service.tools.bench.workers import in_order_by_batch, worker_pool
 
 
 def _blas_threads() -> list[int]:
@@ -19,3 +19,13 @@ def test_workers_share_the_cores_among_their_blas_threads(jobs: int) -> None:
         seen = pool.submit(_blas_threads).result(timeout=60)
     assert seen
     assert all(n == share for n in seen), seen
+
+
+def _square(x: int) -> int:
+    return x * x
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_batches_come_back_whole_in_their_order(jobs: int) -> None:
+    batches = [("a", [1, 2]), ("b", []), ("c", [3])]
+    assert list(in_order_by_batch(_square, batches, jobs)) == [("a", [1, 4]), ("b", []), ("c", [9])]
