@@ -106,6 +106,126 @@ def run_suite_mission(spec: SuiteMission) -> tuple[MissionResult, float]:
     return run_mission(drawn.scenario, spec.seed, max_time_s=limit, oracle=spec.oracle), limit
 
 
+CALIBRATION_LEVEL = 0.95
+"""The stated confidence the suite's calibration figure is about (the issue's "stated 95 %")."""
+CALIBRATION_BANDS = (0.0, 0.8, 0.85, 0.9, CALIBRATION_LEVEL)
+"""Lower edges of the stated-confidence bands of the calibration table; the last band, from
+``CALIBRATION_LEVEL`` up, is the issue's "declarations made at a stated 95 %"."""
+
+
+@dataclass(frozen=True)
+class Band:
+    """The declarations stated at ``lower`` <= confidence < ``upper``: how many, what they stated in
+    all, and how many had the source within their stated radius."""
+
+    lower: float
+    upper: float
+    declarations: int = 0
+    confidence_sum: float = 0.0
+    within: int = 0
+
+    def __add__(self, other: Band) -> Band:
+        if (self.lower, self.upper) != (other.lower, other.upper):
+            raise ValueError("bands with different edges do not add")
+        return replace(
+            self,
+            declarations=self.declarations + other.declarations,
+            confidence_sum=self.confidence_sum + other.confidence_sum,
+            within=self.within + other.within,
+        )
+
+    def label(self) -> str:
+        if self.lower <= 0.0:
+            return f"< {self.upper:.0%}"
+        return f">= {self.lower:.0%}" if self.upper > 1.0 else f"{self.lower:.0%}-{self.upper:.0%}"
+
+    def as_row(self) -> dict[str, Any]:
+        n = self.declarations
+        return {
+            "stated_from": self.lower,
+            "stated_to": min(self.upper, 1.0),
+            "declarations": n,
+            "stated_confidence_mean": self.confidence_sum / n if n else None,
+            "within_stated_radius_rate": self.within / n if n else None,
+        }
+
+
+def _bands() -> tuple[Band, ...]:
+    uppers = (*CALIBRATION_BANDS[1:], math.inf)
+    return tuple(Band(lower, upper) for lower, upper in zip(CALIBRATION_BANDS, uppers, strict=True))
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """How often declarations were right about themselves (the source within the stated radius),
+    by the confidence they stated (``CALIBRATION_BANDS``)."""
+
+    bands: tuple[Band, ...] = field(default_factory=_bands)
+
+    @classmethod
+    def of(cls, results: Sequence[MissionResult]) -> Calibration:
+        declared = [r for r in results if r.declared and r.confidence is not None]
+        stated = [(r.confidence or 0.0, r.within_stated_radius) for r in declared]
+
+        def counted(band: Band) -> Band:
+            inside = [(c, ok) for c, ok in stated if band.lower <= c < band.upper]
+            return replace(
+                band,
+                declarations=len(inside),
+                confidence_sum=sum(c for c, _ in inside),
+                within=sum(ok for _, ok in inside),
+            )
+
+        return cls(tuple(counted(band) for band in _bands()))
+
+    def __add__(self, other: Calibration) -> Calibration:
+        return Calibration(tuple(a + b for a, b in zip(self.bands, other.bands, strict=True)))
+
+    @property
+    def declarations(self) -> int:
+        return sum(b.declarations for b in self.bands)
+
+    @property
+    def within(self) -> int:
+        """Declarations whose source lay within the radius they stated."""
+        return sum(b.within for b in self.bands)
+
+    @property
+    def confidence_sum(self) -> float:
+        return sum(b.confidence_sum for b in self.bands)
+
+    @property
+    def high(self) -> int:
+        """Declarations stated at ``CALIBRATION_LEVEL`` or more ..."""
+        return self.bands[-1].declarations
+
+    @property
+    def high_within(self) -> int:
+        """... and of them, those whose source lay within the stated radius."""
+        return self.bands[-1].within
+
+    def table(self) -> str:
+        """One line per band: declarations, the mean confidence stated, and how often it came true."""
+        lines = [f"{'stated':<12}{'declarations':>13}{'stated mean':>13}{'came true':>11}"]
+        for band in self.bands:
+            n = band.declarations
+            mean = f"{band.confidence_sum / n:.1%}" if n else "-"
+            true = f"{band.within / n:.1%}" if n else "-"
+            lines.append(f"{band.label():<12}{n:>13}{mean:>13}{true:>11}")
+        return "\n".join(lines)
+
+    def line(self) -> str:
+        if not self.declarations:
+            return "calibration: no declarations"
+        high = f"{self.high_within / self.high:.1%}" if self.high else "-"
+        stated, true = self.confidence_sum / self.declarations, self.within / self.declarations
+        return (
+            f"calibration: {self.high} declarations stated at >= {CALIBRATION_LEVEL:.0%}: {high} had the "
+            f"source within their stated radius; all {self.declarations}: stated {stated:.1%} on average, "
+            f"true {true:.1%}"
+        )
+
+
 @dataclass(frozen=True)
 class ClassSummary:
     """One class's figures over its missions."""
@@ -121,7 +241,7 @@ class ClassSummary:
     """The longest time limit among the class's worlds (it scales with area and speed)."""
     median_path_m: float
     failures: dict[FailureClass, int] = field(default_factory=dict)
-    calibration: Calibration = field(default_factory=lambda: Calibration(0, 0, 0.0, 0, 0))
+    calibration: Calibration = field(default_factory=Calibration)
 
     def line(self) -> str:
         """The class's row of the text table (columns of ``HEADER``)."""
@@ -148,56 +268,6 @@ class ClassSummary:
             "declarations": self.calibration.declarations,
             "within_stated_radius": self.calibration.within,
         }
-
-
-CALIBRATION_LEVEL = 0.95
-"""The stated confidence the suite's calibration figure is about (the issue's "stated 95 %")."""
-
-
-@dataclass(frozen=True)
-class Calibration:
-    """How often declarations were right about themselves: the source within the stated radius."""
-
-    declarations: int
-    within: int
-    """Declarations whose source lay within the radius they stated."""
-    confidence_sum: float
-    high: int
-    """Declarations stated at ``CALIBRATION_LEVEL`` or more ..."""
-    high_within: int
-    """... and of them, those whose source lay within the stated radius."""
-
-    @classmethod
-    def of(cls, results: Sequence[MissionResult]) -> Calibration:
-        declared = [r for r in results if r.declared and r.confidence is not None]
-        high = [r for r in declared if r.confidence is not None and r.confidence >= CALIBRATION_LEVEL]
-        return cls(
-            declarations=len(declared),
-            within=sum(r.within_stated_radius for r in declared),
-            confidence_sum=sum(r.confidence or 0.0 for r in declared),
-            high=len(high),
-            high_within=sum(r.within_stated_radius for r in high),
-        )
-
-    def __add__(self, other: Calibration) -> Calibration:
-        return Calibration(
-            self.declarations + other.declarations,
-            self.within + other.within,
-            self.confidence_sum + other.confidence_sum,
-            self.high + other.high,
-            self.high_within + other.high_within,
-        )
-
-    def line(self) -> str:
-        if not self.declarations:
-            return "calibration: no declarations"
-        high = f"{self.high_within / self.high:.1%}" if self.high else "-"
-        stated, true = self.confidence_sum / self.declarations, self.within / self.declarations
-        return (
-            f"calibration: {self.high} declarations stated at >= {CALIBRATION_LEVEL:.0%}: {high} had the "
-            f"source within their stated radius; all {self.declarations}: stated {stated:.1%} on average, "
-            f"true {true:.1%}"
-        )
 
 
 def summarise_class(name: str, outcomes: Sequence[tuple[MissionResult, float]]) -> ClassSummary:
@@ -230,11 +300,13 @@ class SuiteSummary:
     """Wrong declarations per mission, over the whole suite."""
     missions_per_s: float
     elapsed_s: float
-    calibration: Calibration = field(default_factory=lambda: Calibration(0, 0, 0.0, 0, 0))
+    calibration: Calibration = field(default_factory=Calibration)
 
     def line(self) -> str:
         return (
-            self.calibration.line()
+            self.calibration.table()
+            + "\n"
+            + self.calibration.line()
             + "\n"
             + (
                 f"summary: worst class {self.worst_class} {self.worst_success_rate:.1%}; wrong declarations "
@@ -254,6 +326,7 @@ class SuiteSummary:
         row["within_stated_radius_rate"] = c.within / c.declarations if c.declarations else None
         row["declarations_at_95"] = c.high
         row["within_stated_radius_rate_at_95"] = c.high_within / c.high if c.high else None
+        row["calibration_bands"] = [band.as_row() for band in c.bands]
         return row
 
 
@@ -268,7 +341,7 @@ def summarise_suite(classes: Sequence[ClassSummary], elapsed_s: float) -> SuiteS
         wrong_rate=sum(c.wrong_declarations for c in classes) / missions,
         missions_per_s=missions / elapsed_s if elapsed_s > 0 else math.inf,
         elapsed_s=elapsed_s,
-        calibration=sum((c.calibration for c in classes), Calibration(0, 0, 0.0, 0, 0)),
+        calibration=sum((c.calibration for c in classes), Calibration()),
     )
 
 

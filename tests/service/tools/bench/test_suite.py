@@ -44,6 +44,9 @@ def test_json_gives_a_row_per_class_then_the_summary(capsys: pytest.CaptureFixtu
     assert summary["worst_success_rate"] == worst["success_rate"]
     wrong = sum(row["wrong_declarations"] for row in classes)  # type: ignore[misc]
     assert summary["wrong_rate"] == pytest.approx(wrong / summary["missions"])  # type: ignore[operator]
+    bands = summary["calibration_bands"]
+    assert isinstance(bands, list)
+    assert sum(band["declarations"] for band in bands) == summary["declarations"]
     # the easiest class: the default finds its sources (seeds 0-1 of steady both succeed today)
     steady = next(row for row in classes if row["class"] == "steady")
     assert steady["success_rate"] >= 0.5  # type: ignore[operator]
@@ -71,6 +74,7 @@ def test_text_output_names_the_worst_class(capsys: pytest.CaptureFixture[str]) -
     out = capsys.readouterr().out
     assert "never smelled / not reached / undeclared / wrong" in out
     assert "summary: worst class" in out
+    assert "came true" in out  # the calibration table's header
     assert "missions/s" in out
 
 
@@ -149,6 +153,28 @@ def test_calibration_counts_the_statements_that_came_true() -> None:
     both = calibration + calibration
     assert (both.high, both.high_within) == (6, 2)
     assert "3 declarations stated at >= 95%: 33.3% had the source within" in calibration.line()
+
+
+def test_the_calibration_table_says_how_often_each_stated_band_came_true() -> None:
+    def declared(error_m: float, confidence: float) -> MissionResult:
+        return MissionResult(0, 0.0, 0.0, True, error_m < 7.0, 10.0, error_m, 0.0, error_m, 10.0, 1.0,
+                             confidence=confidence, radius_m=5.0)  # fmt: skip
+
+    stated = [(1.0, 0.5), (6.0, 0.82), (2.0, 0.84), (3.0, 0.91), (4.0, 0.93), (9.0, 0.95), (0.5, 0.99)]
+    calibration = suite.Calibration.of([declared(e, c) for e, c in stated])
+    counts = [(b.label(), b.declarations, b.within) for b in calibration.bands]
+    assert counts == [
+        ("< 80%", 1, 1), ("80%-85%", 2, 1), ("85%-90%", 0, 0), ("90%-95%", 2, 2), (">= 95%", 2, 1)
+    ]  # fmt: skip
+    assert calibration.bands[1].confidence_sum == pytest.approx(0.82 + 0.84)
+    lines = calibration.table().splitlines()
+    assert lines[2].split() == ["80%-85%", "2", "83.0%", "50.0%"]
+    assert lines[3].split() == ["85%-90%", "0", "-", "-"]
+    rows = [band.as_row() for band in calibration.bands]
+    assert rows[-1] == {
+        "stated_from": 0.95, "stated_to": 1.0, "declarations": 2,
+        "stated_confidence_mean": pytest.approx(0.97), "within_stated_radius_rate": 0.5,
+    }  # fmt: skip
 
 
 def test_an_arrival_radius_makes_every_vehicle_stop_short_and_changes_nothing_else() -> None:
