@@ -160,22 +160,15 @@ class DeclarationConfig(_Section):
     """Before naming a cell, cross the flow ``check_upflow_m`` upflow of its centre, this far to
     either side and back to its line, m (0: off); odour found upflow there calls the declaration
     off."""
-    persist_s: float = Field(default=10.0, ge=0)
-    """No rule fires until odour has been detected within ``visit_radius_m`` of the estimate at
-    two times at least this far apart, s (0: off). Bayesian mappers only, like the upflow pass it
-    guards (farrell2003, hmm + astar, 200 runs: 64 % -> 53.5 %)."""
     check_upflow_m: float = Field(default=3.0, gt=0)
     """How far upflow of the estimated cell's centre the check crosses the flow, m."""
 
     def for_mapper(self, mapper: str) -> DeclarationConfig:
         """This configuration as it applies to the mapper named ``mapper``: ``hmm_probability``,
-        no upflow pass and no persistence for the hmm, unchanged for any other (including mappers
+        no upflow pass for the hmm, unchanged for any other (including mappers
         outside ``MappingMethod``)."""
         if mapper == MappingMethod.HMM.value:
-            # persist_s guards the upflow pass, which the hmm does not make
-            return self.model_copy(
-                update={"probability": self.hmm_probability, "upflow_pass_m": 0.0, "persist_s": 0.0}
-            )
+            return self.model_copy(update={"probability": self.hmm_probability, "upflow_pass_m": 0.0})
         return self
 
 
@@ -256,6 +249,8 @@ RETIRED_KEYS = {
     "planning.cast_width_m": _NO_CAST,
     "planning.cast_legs": _NO_CAST,
     "planning.flat_map_ratio": "removed: it never changed a mission of the world suite; delete the key",
+    "declaration.persist_s": "removed: the check across the flow does what it did (docs/search-benchmark.md, "
+    "step 26); delete the key",
     "planning.zigzag_spacing_m": _NO_ZIGZAG,
     "planning.zigzag_near_edge_spacings": _NO_ZIGZAG,
     **{

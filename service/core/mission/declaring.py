@@ -330,7 +330,7 @@ class Declaring:
             return None
         t = obs.time_s
         flow = None if frame is None else (frame.ux, frame.uy)
-        found = self._declarer.update(t, likelihood, (obs.x, obs.y), flow, obs.detected)
+        found = self._declarer.update(t, likelihood, (obs.x, obs.y), flow)
         if self.check is not None and self.check.done:
             # flown with no odour upflow: the rule fired at the estimate when the check began
             check, self.check = self.check, None

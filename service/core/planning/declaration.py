@@ -24,13 +24,6 @@ upflow tells them apart: odour there moves the estimate on (and restarts the wai
 leaves it. The mission's trace behaviour flies just beyond the pass whenever the vehicle is at an
 estimate whose pass is still to be made, so the pass comes without a change of planner.
 
-With ``persist_s`` > 0 the rule does not fire until odour has been detected within ``visit_radius_m`` of
-the estimated cell's centre at two times at least ``persist_s`` apart. A source keeps releasing
-where it is, so odour comes back to it however the plume meanders; where a meandering plume has
-swung away, odour was there only while it passed. The guard does not depend on how the vehicle
-looks upflow, so the mission's probe can fly on until the upflow pass is made without the wrong
-declarations that easing the pass otherwise brings.
-
 The estimate is the cell of greatest likelihood (the mapper's ``estimate``); ties go to the
 lowest flat index, as ``numpy.argmax`` does.
 """
@@ -89,7 +82,6 @@ class Declarer:
         self._admit = admit
         self._cell: int | None = None
         self._passed_upflow = False  # the vehicle has been upflow_pass_m upflow of self._cell
-        self._odour: list[tuple[float, float, float]] = []  # detections (t, x, y), for persist_s
 
     @property
     def passed_upflow(self) -> bool:
@@ -116,19 +108,14 @@ class Declarer:
         likelihood: FloatArray,
         vehicle_m: tuple[float, float] | None = None,
         flow: tuple[float, float] | None = None,
-        detected: bool = False,
     ) -> Declaration | None:
         """The declaration if the rule fires at this tick, else None (always None unarmed).
         With ``vehicle_m`` (x, y), nothing fires while the vehicle is farther than
         ``visit_radius_m`` from the estimated cell's centre. With ``upflow_pass_m`` > 0, nothing
         fires until the vehicle (``vehicle_m``) has been that far upflow of the centre against
-        ``flow`` (the mean flow direction, any length); without both, never. With ``persist_s``
-        > 0, nothing fires until ``detected`` ticks (odour at ``vehicle_m``) near the estimate
-        span that long."""
+        ``flow`` (the mean flow direction, any length); without both, never."""
         if self._cell is None:
             return None
-        if detected and vehicle_m is not None and self.config.persist_s > 0.0:
-            self._odour.append((time_s, *vehicle_m))
         cell = int(np.argmax(likelihood))
         if cell != self._cell:
             self._cell = cell
@@ -142,7 +129,7 @@ class Declarer:
             if math.hypot(vehicle_m[0] - cx, vehicle_m[1] - cy) > self.config.visit_radius_m:
                 return None
         mass = mass_within(self.grid, likelihood, cell, self.config.radius_m)
-        if mass < self.config.probability or not self._odour_persists(cell):
+        if mass < self.config.probability:
             return None
         if self._admit is not None and not self._admit(cell):
             return None
@@ -156,18 +143,6 @@ class Declarer:
             probability=float(likelihood.flat[cell]),
             mass=mass,
         )
-
-    def _odour_persists(self, cell: int) -> bool:
-        """Whether odour was detected within ``visit_radius_m`` of ``cell``'s centre at two times at
-        least ``persist_s`` apart (always, with ``persist_s`` 0). A source keeps releasing where it
-        is; a plume that swung away leaves odour at a place only while it passes."""
-        persist = self.config.persist_s
-        if persist <= 0.0:
-            return True
-        cx, cy = self.grid.centre(cell)
-        r = self.config.visit_radius_m
-        times = [t for t, x, y in self._odour if math.hypot(x - cx, y - cy) <= r]
-        return bool(times) and max(times) - min(times) >= persist - 1e-9
 
     def _is_upflow(
         self, cell: int, vehicle_m: tuple[float, float] | None, flow: tuple[float, float] | None

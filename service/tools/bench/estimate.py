@@ -4,7 +4,7 @@ The suite says where a failed mission stopped (never smelled, not reached, undec
 source, wrong); this says why, from the map. Each tick in ``trace`` or ``lost`` puts the mapper's
 greatest cell in one of four places: at the source (within one cell of the source's cell, the
 suite's own test) with the declaration's mass around it, so that only a guard (the visit, the
-upflow pass, ``persist_s``, the check across the flow) holds it back; at the source without that
+upflow pass, the check across the flow) holds it back; at the source without that
 mass; away from it downflow; or away upflow or beside (along the world's mean flow). Two further
 counts overlap those: the estimate within ``AT_ODOUR_M`` of a detection the mission had made
 (the map placed the source at the odour it met), and a flat map, no cell above ``FLAT_RATIO``

@@ -186,7 +186,7 @@ def run_mission(
 
     With ``oracle`` the declaration has a perfect guard: a rule that fires for a cell more than one
     cell from the true source is ignored. No vehicle has one; it bounds what any guard against
-    wrong declarations (``declaration.upflow_pass_m``, ``persist_s``, ``check_width_m``) can gain."""
+    wrong declarations (``declaration.upflow_pass_m``, ``check_width_m``) can gain."""
     config, grid = scenario.config, scenario.grid
     world = build_world(scenario, seed)
     source = place(scenario, seed).source_m

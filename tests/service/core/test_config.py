@@ -45,6 +45,7 @@ def test_unknown_key_is_named(tmp_path: Path) -> None:
         ("planning", "lost_trace_mass"),
         ("planning", "cast_legs"),
         ("planning", "cast_width_m"),
+        ("declaration", "persist_s"),
     ],
 )
 def test_a_removed_key_says_what_to_do(tmp_path: Path, section: str, key: str) -> None:

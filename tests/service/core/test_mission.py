@@ -72,9 +72,9 @@ PAPERS_PLANNING = PlanningConfig(
 """The planning these tests were written against: the papers' mechanisms without the later guard
 (looking for the plume again after lone contacts); a test of it turns it on."""
 
-PAPERS_DECLARATION = DeclarationConfig(upflow_pass_m=0.0, check_width_m=0.0, persist_s=0.0)
+PAPERS_DECLARATION = DeclarationConfig(upflow_pass_m=0.0, check_width_m=0.0)
 """The declaration these tests were written against: the papers' rules without the later guards
-(no upflow pass, check across the flow or persistence test)."""
+(no upflow pass or check across the flow)."""
 
 NEVER = PAPERS_DECLARATION.model_copy(
     update={"probability": 1.0, "hmm_probability": 1.0, "upflow_pass_m": 1e9}
@@ -438,7 +438,7 @@ def test_states_are_the_zenoh_estimate_states() -> None:
 
 
 def test_from_config() -> None:
-    config = build_config({}, ["planning.method=apf", "declaration.persist_s=12.5"])
+    config = build_config({}, ["planning.method=apf", "declaration.check_upflow_m=2.5"])
     mission = Mission.from_config(config, AREA, ScriptedMapper(AREA))
     assert mission.planner.name == "apf"
     assert mission.state is MissionState.FIND

@@ -25,7 +25,6 @@ CONFIG = DeclarationConfig(
     upflow_pass_m=0.0,
     check_width_m=6.0,
     check_upflow_m=3.0,
-    persist_s=0.0,
 )
 ROUTING = Routing.of(AREA, PlanningConfig())
 

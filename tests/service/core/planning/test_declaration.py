@@ -7,10 +7,9 @@ from service.core.planning.declaration import Declarer, mass_within
 
 G = Grid(0.0, 5.0, 0.0, 5.0, columns=5, rows=5)  # 1 m cells
 
-PAPERS_DECLARATION = DeclarationConfig(upflow_pass_m=0.0, check_width_m=0.0, persist_s=0.0)
+PAPERS_DECLARATION = DeclarationConfig(upflow_pass_m=0.0, check_width_m=0.0)
 """The declaration these tests were written against: the papers' rules without the later guards
-(no upflow pass, check across the flow or persistence test); each test turns on
-the one it is about."""
+(no upflow pass or check across the flow); each test turns on the one it is about."""
 
 
 def peaked(cell: int, peak: float = 0.3) -> np.ndarray:
@@ -111,8 +110,8 @@ def test_upflow_pass_is_on_by_default_off_at_0_and_for_the_hmm() -> None:
     pi = peaked(12, 0.6)  # centre (2.5, 2.5)
     east = (1.0, 0.0)
     mass = {"probability": 0.5, "radius_m": 0.0}
-    # the default pass (persistence, its own guard, off): nothing fires until 2 m upflow
-    passing = Declarer(G, DeclarationConfig(persist_s=0.0).model_copy(update=mass))
+    # the default pass: nothing fires until 2 m upflow
+    passing = Declarer(G, DeclarationConfig().model_copy(update=mass))
     passing.arm(0.0, pi)
     assert passing.update(1.0, pi, (3.0, 2.5), east) is None  # downflow of the centre
     assert passing.update(2.0, pi, (0.5, 2.5), east) is not None  # 2 m upflow
@@ -120,34 +119,6 @@ def test_upflow_pass_is_on_by_default_off_at_0_and_for_the_hmm() -> None:
     off = Declarer(G, PAPERS_DECLARATION.model_copy(update=mass))
     off.arm(0.0, pi)
     assert off.update(1.0, pi, (3.0, 2.5), east) is not None
-
-
-def test_persist_waits_for_odour_near_the_estimate_at_two_times_far_enough_apart() -> None:
-    config = PAPERS_DECLARATION.model_copy(update={"probability": 0.5, "radius_m": 0.0, "persist_s": 20.0})
-    d = Declarer(G, config)
-    pi = peaked(12, 0.6)  # centre (2.5, 2.5); visit radius 3 m
-    d.arm(0.0, pi)
-    assert d.update(1.0, pi, (2.5, 2.5), detected=True) is None  # odour once: no span yet
-    assert d.update(11.0, pi, (2.0, 2.5), detected=True) is None  # 10 s apart
-    assert d.update(15.0, pi, (2.5, 2.5)) is None  # no odour: the span is still 10 s
-    assert d.update(20.0, pi, (4.9, 4.9), detected=True) is None  # 3.4 m away: not near the estimate
-    found = d.update(21.0, pi, (3.0, 2.0), detected=True)  # near it, 20 s after the first
-    assert found is not None
-    assert found.cell == 12
-
-
-def test_persist_is_on_by_default_off_at_0_and_for_the_hmm() -> None:
-    assert DeclarationConfig().persist_s == 10.0
-    assert DeclarationConfig().for_mapper("hmm").persist_s == 0.0
-    assert DeclarationConfig(persist_s=20.0).for_mapper("hmm").persist_s == 0.0
-    assert DeclarationConfig(persist_s=20.0).for_mapper("pomdp").persist_s == 20.0
-    d = Declarer(
-        G,
-        PAPERS_DECLARATION.model_copy(update={"probability": 0.5, "radius_m": 0.0}),
-    )
-    pi = peaked(12, 0.6)
-    d.arm(0.0, pi)
-    assert d.update(1.0, pi, (2.5, 2.5)) is not None  # persist_s 0: no odour needed at all
 
 
 def test_admit_ignores_a_rule_for_a_refused_cell() -> None:

@@ -88,8 +88,8 @@ def test_an_unknown_class_or_key_is_refused(capsys: pytest.CaptureFixture[str]) 
 def test_the_oracle_ignores_what_the_guards_let_through(capsys: pytest.CaptureFixture[str]) -> None:
     """With every guard off, steady seed 0 names a wrong place; with the perfect guard that
     declaration is ignored, and the rows say they are a bound."""
-    unguarded = ["--set", "declaration.persist_s=0", "--set", "declaration.check_width_m=0",
-                 "--set", "declaration.upflow_pass_m=0", "--set", "declaration.probability=0.5"]  # fmt: skip
+    unguarded = ["--set", "declaration.check_width_m=0", "--set", "declaration.upflow_pass_m=0",
+                 "--set", "declaration.probability=0.5"]  # fmt: skip
     command = ["bench", "suite", "--class", "steady", "--runs", "1", "--first-seed", "0",
                "--jobs", "1", "--json"]  # fmt: skip
     assert main([*command, *unguarded]) == 0
