@@ -107,7 +107,6 @@ class MappingConfig(_Section):
     window: int = Field(default=50, gt=0, le=10_000)
     sigma_x: float = Field(default=0.2, gt=0)
     sigma_y: float = Field(default=0.2, gt=0)
-    drift_spread: float = Field(default=0.3, ge=0)
     forgetting: float = Field(default=0.003, ge=0, lt=1)
     zero_lag: bool = True
     footprint_m: float = Field(default=0.8, ge=0)
@@ -249,6 +248,8 @@ RETIRED_KEYS = {
     "planning.cast_width_m": _NO_CAST,
     "planning.cast_legs": _NO_CAST,
     "planning.flat_map_ratio": "removed: it never changed a mission of the world suite; delete the key",
+    "mapping.drift_spread": "removed: the suite's missions came out the same without the drift error "
+    "(docs/search-benchmark.md, step 26); delete the key",
     "declaration.persist_s": "removed: the check across the flow does what it did (docs/search-benchmark.md, "
     "step 26); delete the key",
     "planning.zigzag_spacing_m": _NO_ZIGZAG,

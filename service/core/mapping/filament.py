@@ -13,21 +13,6 @@ with sigma sqrt(t_k - t_l). We use the exact Gaussian mass over the cell instead
 normal CDFs across the cell's extent: it is equally separable, always in [0, 1], and equals eq. 1
 to first order when the cell is small compared with the spread.
 
-Drift uncertainty (ours, off by default): V is the flow record *at the vehicle*, but in a flow that
-varies in space (seed hmm-plume-mapping §V, a meandering plume) a filament elsewhere drifted with
-a different flow. With ``drift_spread`` = k > 0 each axis gets, besides the random walk, a drift
-error: k times the spread of the flow's fluctuation summed over the n = tau / dt ticks of the lag.
-Per axis the fluctuation's std s (m/s) and its tick-to-tick correlation rho are measured over the
-window, and the sum is that of a first-order autoregressive process:
-
-    e_tau = k s dt sqrt(n (1 + rho) / (1 - rho) - 2 rho (1 - rho^n) / (1 - rho)^2)
-    s_tau = sqrt(sigma^2 tau + e_tau^2)                                      (drift-spread eq. D1)
-
-A fluctuation that persists (rho -> 1: a meander, a turn of the flow) gives e_tau = k s tau, an
-error linear in the lag; one that changes every tick (rho = 0: white noise, as in the papers'
-turbulent case, whose flow is the same everywhere and whose record is exact) gives k s sqrt(tau dt),
-a random walk no wider than the filament's own. The axes stay independent, so p_ij stays separable.
-
 A point detector with a growing footprint (ours, off by default): the papers count a filament as
 smelt when it lies anywhere in the vehicle's cell. A source in the vehicle's own cell then always has
 this tick's filament there, and each detection favours that cell over a source upflow, whose
@@ -63,7 +48,7 @@ ordered newest release first (shortest lag first).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -107,55 +92,6 @@ def release_offsets(
         np.concatenate([drift_x, drift_x[-1] + k * dx.mean()]),
         np.concatenate([drift_y, drift_y[-1] + k * dy.mean()]),
     )
-
-
-def flow_velocities(steps: Sequence[FlowStep]) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Each tick's duration dt (s) and the flow's x and y components (m/s) over ``steps``."""
-    dt = np.fromiter((s.dt_s for s in steps), dtype=float, count=len(steps))
-    ux = np.fromiter((s.dx_m for s in steps), dtype=float, count=len(steps)) / dt
-    uy = np.fromiter((s.dy_m for s in steps), dtype=float, count=len(steps)) / dt
-    return dt, ux, uy
-
-
-def flow_spread(history: Iterable[FlowStep]) -> tuple[float, float]:
-    """Standard deviation (m/s) of the flow's x and y components over ``history``, each tick
-    weighted by its duration; (0, 0) with fewer than two ticks."""
-    steps = list(history)
-    if len(steps) < 2:
-        return 0.0, 0.0
-    dt, ux, uy = flow_velocities(steps)
-    weights = dt / dt.sum()
-    sx = float(np.sqrt(np.dot(weights, (ux - np.dot(weights, ux)) ** 2)))
-    sy = float(np.sqrt(np.dot(weights, (uy - np.dot(weights, uy)) ** 2)))
-    return sx, sy
-
-
-def flow_persistence(history: Iterable[FlowStep]) -> tuple[float, float]:
-    """Tick-to-tick (lag-one) autocorrelation of the flow's x and y components over ``history``,
-    clipped to [0, 1]; 0 with fewer than three ticks or for a component that never varied."""
-    steps = list(history)
-    if len(steps) < 3:
-        return 0.0, 0.0
-    _, ux, uy = flow_velocities(steps)
-    rho = []
-    for u in (ux, uy):
-        d = u - u.mean()
-        variance = float(np.dot(d, d))
-        r = float(np.dot(d[:-1], d[1:])) / variance if variance > 0.0 else 0.0
-        rho.append(min(max(r, 0.0), 1.0))
-    return rho[0], rho[1]
-
-
-def drift_error_m(lag_s: FloatArray, dt_s: float, sd_mps: float, rho: float) -> FloatArray:
-    """Std (m) of a flow fluctuation (std ``sd_mps``, tick-to-tick correlation ``rho``) summed over
-    the lag_s / dt_s ticks of each lag: e_tau of eq. D1 without k."""
-    n = lag_s / dt_s
-    if rho >= 1.0:
-        ticks = n**2
-    else:
-        ticks = n * (1.0 + rho) / (1.0 - rho) - 2.0 * rho * (1.0 - rho**n) / (1.0 - rho) ** 2
-    error: FloatArray = sd_mps * dt_s * np.sqrt(np.maximum(ticks, 0.0))
-    return error
 
 
 def axis_cell_mass(edges: FloatArray, centre: FloatArray, spread: FloatArray) -> FloatArray:
@@ -210,8 +146,6 @@ def filament_factors(
     drift_y_m: FloatArray,
     sigma_x: float,
     sigma_y: float,
-    drift_error_x_m: FloatArray | None = None,
-    drift_error_y_m: FloatArray | None = None,
     footprint_m: float = 0.0,
     footprint_growth: float = 0.0,
 ) -> tuple[FloatArray, FloatArray]:
@@ -221,17 +155,14 @@ def filament_factors(
     from a source in cell (row, col) is in the vehicle's cell now: the mass over cell C_i of the
     source position of eq. 4, X_s ~ N(X_j - V(t_l, t_k), (t_k - t_l) sigma^2), which is the same
     as the mass of the filament over C_j (pomdp-astar eq. 1, exact per cell rather than midpoint).
-    ``drift_error_*_m`` (e_tau of eq. D1, one per release time, m) widen it by the drift error.
     With ``footprint_m`` > 0, (x, y) is the detector's own position and the filament is smelt
     within r(tau) of eq. F1 of it instead of in the cell (eq. F2).
     """
     x_edges: FloatArray = grid.x_min + np.arange(grid.columns + 1, dtype=np.float64) * grid.cell_width_m
     y_edges: FloatArray = grid.y_min + np.arange(grid.rows + 1, dtype=np.float64) * grid.cell_height_m
-    # reactive-planning eq. 4: X_s = X_j - V(t_l, t_k) - W(t_l, t_k), W's spread per eq. D1
-    # (hypot(a, 0) is exactly a: with no drift error the papers' spread, bit for bit)
+    # reactive-planning eq. 4: X_s = X_j - V(t_l, t_k) - W(t_l, t_k), W ~ N(0, (t_k - t_l) sigma^2)
     root_lag = np.sqrt(lag_s)
-    spread_x = np.hypot(sigma_x * root_lag, 0.0 if drift_error_x_m is None else drift_error_x_m)
-    spread_y = np.hypot(sigma_y * root_lag, 0.0 if drift_error_y_m is None else drift_error_y_m)
+    spread_x, spread_y = sigma_x * root_lag, sigma_y * root_lag
     if footprint_m > 0.0:
         # footprint eq. F1: the detection radius of a filament of each release time's age
         radius = np.sqrt(footprint_m**2 + footprint_growth * lag_s)
@@ -251,7 +182,6 @@ def history_factors(
     sigma_y: float,
     *,
     zero_lag: bool = False,
-    drift_spread: float = 0.0,
     reach_m: float = 0.0,
     footprint_m: float = 0.0,
     footprint_growth: float = 0.0,
@@ -259,7 +189,7 @@ def history_factors(
 ) -> tuple[FloatArray, FloatArray]:
     """``filament_factors`` for flat cell ``cell`` over every release time in ``history``; with
     ``zero_lag`` also the release of this very tick (lag 0, still at its source: the first row);
-    ``drift_spread`` is k of eq. D1 (0: the papers' model); ``reach_m`` > 0 adds the prehistory;
+    ``reach_m`` > 0 adds the prehistory;
     ``footprint_m`` > 0 the point detector of eq. F1-F2, at ``at`` (the vehicle's position in
     ``cell``; the cell's centre when None)."""
     steps = list(history)
@@ -270,13 +200,15 @@ def history_factors(
         # have left the cell (it often has, at 1 m/s in a 2.5 m cell) to expect a detection
         lag, drift_x, drift_y = (np.concatenate([[0.0], a]) for a in (lag, drift_x, drift_y))
     x, y = at if at is not None and footprint_m > 0.0 else grid.centre(cell)
-    error_x = error_y = None
-    if drift_spread > 0.0 and steps:
-        sd_x, sd_y = flow_spread(steps)
-        rho_x, rho_y = flow_persistence(steps)
-        dt = float(np.mean([s.dt_s for s in steps]))
-        error_x = drift_spread * drift_error_m(lag, dt, sd_x, rho_x)
-        error_y = drift_spread * drift_error_m(lag, dt, sd_y, rho_y)
     return filament_factors(
-        grid, x, y, lag, drift_x, drift_y, sigma_x, sigma_y, error_x, error_y, footprint_m, footprint_growth
+        grid,
+        x,
+        y,
+        lag,
+        drift_x,
+        drift_y,
+        sigma_x,
+        sigma_y,
+        footprint_m=footprint_m,
+        footprint_growth=footprint_growth,
     )

@@ -37,12 +37,6 @@ class MapperParams:
     sigma_x: float = 1.0
     """Random-walk spreading of a filament along x, m / sqrt(s) (seed reactive-planning eq. 1)."""
     sigma_y: float = 1.0
-    drift_spread: float = 0.0
-    """Gain k of the drift uncertainty (filament eq. D1), dimensionless: a filament of lag tau gets an
-    extra per-axis spread k times the std of that flow component's fluctuation summed over the lag,
-    from its std and tick-to-tick correlation over the window: linear in the lag for a fluctuation
-    that persists, a random walk for one that does not (Bayesian and POMDP mappers; 0: the papers'
-    model)."""
     forgetting: float = 0.0
     """Share of pi handed back to the uniform prior after each update (Bayesian and POMDP
     mappers; 0: the papers' models). The models take the flow at the vehicle for the flow
@@ -82,8 +76,6 @@ class MapperParams:
             raise ValueError(f"window must be >= 1, got {self.window}")
         if not (0 < self.mu <= 1 and 0 <= self.false_alarm < 1):
             raise ValueError(f"need 0 < mu <= 1 and 0 <= false_alarm < 1, got {self.mu}, {self.false_alarm}")
-        if not self.drift_spread >= 0.0:
-            raise ValueError(f"drift_spread must be >= 0, got {self.drift_spread}")
         if not 0 <= self.forgetting < 1:
             raise ValueError(f"forgetting must be in [0, 1), got {self.forgetting}")
         if not (self.footprint_m >= 0.0 and self.footprint_growth >= 0.0):
@@ -103,7 +95,6 @@ class MapperParams:
             window=m.window,
             sigma_x=m.sigma_x,
             sigma_y=m.sigma_y,
-            drift_spread=m.drift_spread,
             forgetting=m.forgetting,
             mu=s.detection_probability,
             false_alarm=s.false_alarm_probability,
@@ -298,7 +289,6 @@ class ObservationModelMapper(SourceMapper):
             p.sigma_x,
             p.sigma_y,
             zero_lag=p.zero_lag,
-            drift_spread=p.drift_spread,
             reach_m=self._reach_m if p.prehistory else 0.0,
             footprint_m=p.footprint_m,
             footprint_growth=p.footprint_growth,

@@ -7,10 +7,7 @@ from scipy.stats import norm
 
 from service.core.grid import Grid
 from service.core.mapping.filament import (
-    drift_error_m,
     filament_factors,
-    flow_persistence,
-    flow_spread,
     footprint_mass,
     history_factors,
     release_offsets,
@@ -134,68 +131,6 @@ def test_empty_history_has_no_release_times() -> None:
     px, py = history_factors(SMALL, 0, [], 1.0, 1.0)
     assert px.shape == (0, 5)
     assert py.shape == (0, 4)
-
-
-def test_flow_spread_is_the_time_weighted_std_of_each_component() -> None:
-    def step(ux: float, uy: float, dt: float) -> FlowStep:
-        return FlowStep(transition(SMALL, ux, uy, dt), ux * dt, uy * dt, dt)
-
-    # u_x: 1 for 1 s, 2 for 3 s -> mean 1.75, variance (0.75^2 * 1 + 0.25^2 * 3) / 4 = 0.1875
-    history = [step(1.0, 0.0, 1.0), step(2.0, 0.0, 3.0)]
-    sx, sy = flow_spread(history)
-    assert sx == pytest.approx(math.sqrt(0.1875))
-    assert sy == 0.0
-    assert flow_spread(history[:1]) == (0.0, 0.0)
-
-
-def test_flow_persistence_is_the_lag_one_autocorrelation_of_each_component() -> None:
-    def step(ux: float, uy: float) -> FlowStep:
-        return FlowStep(transition(SMALL, ux, uy, 1.0), ux, uy, 1.0)
-
-    # u_x 1, 2, 3, 4: deviations -1.5, -0.5, 0.5, 1.5 -> (0.75 - 0.25 + 0.75) / 5 = 0.25
-    # u_y 0.5, -0.5, 0.5, -0.5 alternates: negative, clipped to 0
-    history = [step(1.0, 0.5), step(2.0, -0.5), step(3.0, 0.5), step(4.0, -0.5)]
-    assert flow_persistence(history) == pytest.approx((0.25, 0.0))
-    assert flow_persistence(history[:2]) == (0.0, 0.0)  # too few ticks to tell
-    assert flow_persistence([step(1.0, 0.0)] * 5) == (0.0, 0.0)  # never varied
-
-
-@pytest.mark.parametrize(
-    ("rho", "ticks", "variance"),
-    [
-        (0.0, 3.0, 3.0),  # white noise: a random walk, n
-        (0.5, 2.0, 3.0),  # u1 + u2: 2 + 2 rho
-        (0.5, 3.0, 5.5),  # 3 + 2 (2 rho + rho^2)
-        (1.0, 3.0, 9.0),  # a fluctuation that persists: n^2
-        (0.999999, 3.0, 9.0),  # its limit, without cancellation
-    ],
-)
-def test_drift_error_sums_the_fluctuation_over_the_lag_by_hand(
-    rho: float, ticks: float, variance: float
-) -> None:
-    # sd 0.4 m/s over 2 s ticks: the lag of n ticks is 2 n s
-    error = drift_error_m(np.array([0.0, 2.0 * ticks]), 2.0, 0.4, rho)
-    np.testing.assert_allclose(error, [0.0, 0.4 * 2.0 * math.sqrt(variance)], rtol=1e-5)
-
-
-def test_drift_spread_widens_by_eq_d1() -> None:
-    def step(ux: float, uy: float) -> FlowStep:
-        return FlowStep(transition(SMALL, ux, uy, 1.0), ux, uy, 1.0)
-
-    # u_y 0, 0.5, 1, 1.5, 2: std sqrt(0.5) m/s, lag-one correlation (0.5 + 0 + 0 + 0.5) / 2.5 = 0.4
-    history = [step(1.0, 0.5 * k) for k in range(5)]
-    k, sigma = 2.0, 0.5
-    px, py = history_factors(SMALL, SMALL.cell_of(7.0, 3.0), history, sigma, sigma, drift_spread=k)
-    px0, _ = history_factors(SMALL, SMALL.cell_of(7.0, 3.0), history, sigma, sigma)
-    np.testing.assert_array_equal(px, px0)  # u_x never varied: no extra spread along x
-    s_y, rho = math.sqrt(0.5), 0.4
-    y_edges = np.arange(5) * 2.0
-    drift_y = 0.0
-    for n, newest_first in enumerate([2.0, 1.5, 1.0, 0.5, 0.0], start=1):
-        drift_y += newest_first
-        ticks = n * (1 + rho) / (1 - rho) - 2 * rho * (1 - rho**n) / (1 - rho) ** 2
-        spread = math.sqrt(sigma**2 * n + k**2 * s_y**2 * ticks)  # eq. D1
-        np.testing.assert_allclose(py[n - 1], reference_factor(y_edges, 3.0, drift_y, spread), atol=1e-14)
 
 
 def _flow_steps(n: int, dx: float) -> list[FlowStep]:
