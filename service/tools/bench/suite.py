@@ -134,20 +134,32 @@ class Band:
             within=self.within + other.within,
         )
 
+    @property
+    def stated_mean(self) -> float | None:
+        return self.confidence_sum / self.declarations if self.declarations else None
+
+    @property
+    def came_true(self) -> float | None:
+        """Share of the band's declarations with the source within their stated radius."""
+        return self.within / self.declarations if self.declarations else None
+
     def label(self) -> str:
         if self.lower <= 0.0:
             return f"< {self.upper:.0%}"
         return f">= {self.lower:.0%}" if self.upper > 1.0 else f"{self.lower:.0%}-{self.upper:.0%}"
 
     def as_row(self) -> dict[str, Any]:
-        n = self.declarations
         return {
             "stated_from": self.lower,
             "stated_to": min(self.upper, 1.0),
-            "declarations": n,
-            "stated_confidence_mean": self.confidence_sum / n if n else None,
-            "within_stated_radius_rate": self.within / n if n else None,
+            "declarations": self.declarations,
+            "stated_confidence_mean": self.stated_mean,
+            "within_stated_radius_rate": self.came_true,
         }
+
+
+def _percent(share: float | None) -> str:
+    return "-" if share is None else f"{share:.1%}"
 
 
 def _bands() -> tuple[Band, ...]:
@@ -208,10 +220,8 @@ class Calibration:
         """One line per band: declarations, the mean confidence stated, and how often it came true."""
         lines = [f"{'stated':<12}{'declarations':>13}{'stated mean':>13}{'came true':>11}"]
         for band in self.bands:
-            n = band.declarations
-            mean = f"{band.confidence_sum / n:.1%}" if n else "-"
-            true = f"{band.within / n:.1%}" if n else "-"
-            lines.append(f"{band.label():<12}{n:>13}{mean:>13}{true:>11}")
+            mean, true = (_percent(share) for share in (band.stated_mean, band.came_true))
+            lines.append(f"{band.label():<12}{band.declarations:>13}{mean:>13}{true:>11}")
         return "\n".join(lines)
 
     def line(self) -> str:
