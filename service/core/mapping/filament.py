@@ -125,11 +125,12 @@ def footprint_mass(
     and W ~ N(0, spread_l^2): footprint eq. F2, shape (W, len(edges) - 1). A zero spread is the
     overlap of the footprint with the cell, over the cell's width."""
     s = np.maximum(spread, 1e-9)[:, None]
-    lo, hi = edges[None, :-1], edges[None, 1:]
 
     def integral(a: FloatArray) -> FloatArray:
-        # I(a) of eq. F2: the integral of Phi((a - X) / s) over X in [lo, hi]
-        out: FloatArray = s * (_normal_cdf_integral((a - lo) / s) - _normal_cdf_integral((a - hi) / s))
+        # I(a) of eq. F2: the integral of Phi((a - X) / s) over X in [lo, hi]; G once per edge,
+        # since each cell's hi is the next cell's lo
+        g = _normal_cdf_integral((a - edges[None, :]) / s)
+        out: FloatArray = s * (g[:, :-1] - g[:, 1:])
         return out
 
     c, r = centre[:, None], radius[:, None]
