@@ -271,8 +271,17 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
     m.add_argument(
         "--cells", type=int, action="append", choices=sorted(mapping.GRID_SHAPES), help="grid size(s)"
     )
-    m.add_argument("--window", type=int, default=200, help="flow-history window, ticks (default 200)")
-    m.add_argument("--ticks", type=int, default=None, help="timed ticks per configuration")
+    m.add_argument(
+        "--window", type=_at_least(1), default=None,
+        help="flow-history window, ticks (default 200, or the configuration's with --config)",
+    )  # fmt: skip
+    m.add_argument("--ticks", type=_at_least(1), default=None, help="timed ticks per configuration")
+    m.add_argument(
+        "--config", default=None, metavar="FILE",
+        help="time the mappers with this configuration's model ([mapping], [sensor]; e.g. "
+        "config/default.toml: what a deployment computes) instead of the papers' models",
+    )  # fmt: skip
+    _add_overrides(m, "KEY=VALUE", "override a key of that configuration (implies the default configuration)")
 
     s = kinds.add_parser("search", help="seeded closed-loop missions: success rate and time to the source")
     s.add_argument("--scenario", required=True, help="scenario name (config/scenarios) or TOML path")

@@ -37,11 +37,20 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_mapping(args: argparse.Namespace) -> int:
+    params, model = None, mapping.PAPERS
+    if args.config is not None or args.set:
+        from service.core.config import load_config
+        from service.core.mapping import MapperParams
+
+        # a broken configuration stops here, naming the key
+        params = MapperParams.from_config(load_config(args.config, tuple(args.set)))
+        model = " ".join([args.config or "config/default.toml", *(f"--set {s}" for s in args.set)])
     if not args.json:
+        print("model: " + ("the papers'" if params is None else model), flush=True)
         print(
             f"{'mapper':<8}{'cells':>9}{'window':>8}{'median ms':>11}{'p95 ms':>9}{'peak MB':>9}", flush=True
         )
-    for result in mapping.run(args.mappers, args.cells, args.window, args.ticks):
+    for result in mapping.run(args.mappers, args.cells, args.window, args.ticks, params, model):
         if args.json:
             print(json.dumps(mapping.as_row(result)), flush=True)
         else:

@@ -3,6 +3,9 @@
 Each (mapper, cells) configuration runs in a fresh child process, so its peak resident memory
 is its own. The history window is filled before timing starts; the vehicle sweeps the area at
 1 m/s under a meandering flow with about one detection in ten ticks (seeded, reproducible).
+The mappers run the papers' models unless given the model parameters of a service configuration
+(``MapperParams.from_config``: what a deployment of it computes each tick, footprint and
+prehistory included).
 """
 
 from __future__ import annotations
@@ -12,7 +15,7 @@ import multiprocessing
 import resource
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -24,9 +27,15 @@ GRID_SHAPES: dict[int, tuple[int, int]] = {1_000: (40, 25), 10_000: (100, 100), 
 """Cells -> (columns, rows) over the papers' 100 m x 100 m area."""
 
 
+PAPERS = "papers"
+"""``MappingResult.model`` of the papers' models (``MapperParams`` defaults)."""
+
+
 @dataclass(frozen=True)
 class MappingResult:
     mapper: str
+    model: str
+    """``PAPERS``, or the configuration whose model parameters were used."""
     cells: int
     window: int
     ticks: int
@@ -49,11 +58,20 @@ def _observations(count: int, seed: int) -> list[Observation]:
     return obs
 
 
-def measure(method: str, cells: int, window: int, ticks: int, seed: int = 0) -> MappingResult:
-    """Median and p95 wall time of ``update`` over ``ticks`` ticks after a full window."""
+def measure(
+    method: str,
+    cells: int,
+    window: int,
+    ticks: int,
+    seed: int = 0,
+    params: MapperParams | None = None,
+    model: str = PAPERS,
+) -> MappingResult:
+    """Median and p95 wall time of ``update`` over ``ticks`` ticks after a full window, with the
+    papers' models or ``params`` (their window replaced by ``window``)."""
     columns, rows = GRID_SHAPES[cells]
     grid = Grid(0.0, 100.0, -50.0, 50.0, columns=columns, rows=rows)
-    mapper = make_mapper(method, grid, MapperParams(window=window))
+    mapper = make_mapper(method, grid, replace(params or MapperParams(), window=window))
     stream = _observations(window + 1 + ticks, seed)
     for obs in stream[: window + 1]:
         mapper.update(obs)
@@ -66,6 +84,7 @@ def measure(method: str, cells: int, window: int, ticks: int, seed: int = 0) -> 
     ms = np.array(times) * 1e3
     return MappingResult(
         mapper=method,
+        model=model,
         cells=cells,
         window=window,
         ticks=ticks,
@@ -87,15 +106,24 @@ def memory_bandwidth_gb_per_s(megabytes: int = 256, repeats: int = 7) -> float:
     return round(2 * src.nbytes / float(np.median(times)) / 1e9, 2)
 
 
+DEFAULT_WINDOW = 200
+"""The papers' models are timed with this flow-history window unless told otherwise."""
+
+
 def run(
     methods: list[str] | None = None,
     cells: list[int] | None = None,
-    window: int = 200,
+    window: int | None = None,
     ticks: int | None = None,
+    params: MapperParams | None = None,
+    model: str = PAPERS,
 ) -> list[MappingResult]:
-    """Every (mapper, cells) configuration, each in its own child process."""
+    """Every (mapper, cells) configuration, each in its own child process; with ``params`` (named
+    ``model``) the mappers use them, and the window is theirs unless ``window`` is given."""
     methods = methods or sorted(MAPPERS)
     cells = cells or sorted(GRID_SHAPES)
+    if window is None:
+        window = params.window if params is not None else DEFAULT_WINDOW
     results = []
     for c in cells:
         n_ticks = ticks if ticks is not None else (60 if c >= 100_000 else 200)
@@ -103,7 +131,7 @@ def run(
             # a fresh interpreter each time (spawn, not fork) so ru_maxrss is this configuration's own
             spawn = multiprocessing.get_context("spawn")
             with ProcessPoolExecutor(max_workers=1, mp_context=spawn, max_tasks_per_child=1) as pool:
-                results.append(pool.submit(measure, method, c, window, n_ticks).result())
+                results.append(pool.submit(measure, method, c, window, n_ticks, 0, params, model).result())
     return results
 
 
