@@ -281,7 +281,12 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
         help="time the mappers with this configuration's model ([mapping], [sensor]; e.g. "
         "config/default.toml: what a deployment computes) instead of the papers' models",
     )  # fmt: skip
-    _add_overrides(m, "KEY=VALUE", "override a key of that configuration (implies the default configuration)")
+    _add_overrides(
+        m,
+        "KEY=VALUE",
+        "override a key of that configuration (implies the default configuration)",
+        dest="overrides",
+    )
 
     s = kinds.add_parser("search", help="seeded closed-loop missions: success rate and time to the source")
     s.add_argument("--scenario", required=True, help="scenario name (config/scenarios) or TOML path")

@@ -193,8 +193,7 @@ def history_factors(
     ``reach_m`` > 0 adds the prehistory;
     ``footprint_m`` > 0 the point detector of eq. F1-F2, at ``at`` (the vehicle's position in
     ``cell``; the cell's centre when None)."""
-    steps = list(history)
-    lag, drift_x, drift_y = release_offsets(steps, reach_m)
+    lag, drift_x, drift_y = release_offsets(history, reach_m)
     if zero_lag:
         # a continuous source has odour at its own position now; the papers' releases stop at the
         # previous tick, so a vehicle in the source's cell would need last tick's filament not to

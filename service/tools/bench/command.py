@@ -38,13 +38,13 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_mapping(args: argparse.Namespace) -> int:
     params, model = None, mapping.PAPERS
-    if args.config is not None or args.set:
+    if args.config is not None or args.overrides:
         from service.core.config import load_config
         from service.core.mapping import MapperParams
 
         # a broken configuration stops here, naming the key
-        params = MapperParams.from_config(load_config(args.config, tuple(args.set)))
-        model = " ".join([args.config or "config/default.toml", *(f"--set {s}" for s in args.set)])
+        params = MapperParams.from_config(load_config(args.config, tuple(args.overrides)))
+        model = _configuration(args)
     if not args.json:
         print("model: " + ("the papers'" if params is None else model), flush=True)
         print(
@@ -176,9 +176,13 @@ def _missions(args: argparse.Namespace, files: list[Path]) -> str:
     """What a suite-wide run measures: classes, missions, seeds and configuration, in words."""
     return (
         f"{len(files)} classes x {args.runs} missions (seeds {args.first_seed}.."
-        f"{args.first_seed + args.runs - 1}), configuration {args.config or 'config/default.toml'}"
-        f"{''.join(f' --set {o}' for o in args.overrides)}"
+        f"{args.first_seed + args.runs - 1}), configuration {_configuration(args)}"
     )
+
+
+def _configuration(args: argparse.Namespace) -> str:
+    """The service configuration a command runs with, as given: its file and ``--set`` overrides."""
+    return "".join([args.config or "config/default.toml", *(f" --set {o}" for o in args.overrides)])
 
 
 def _class_batches(
