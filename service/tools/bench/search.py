@@ -109,6 +109,8 @@ class MissionResult:
     confidence: float | None = None
     """The declaration's stated probability that the source lies within ``radius_m`` of it."""
     radius_m: float | None = None
+    vehicle_speed_mps: float | None = None
+    """The simulated vehicle's cruise speed (the suite's time limits shrink with it)."""
     trace: MissionTrace | None = field(default=None, compare=False)
 
     @property
@@ -246,6 +248,7 @@ def run_mission(
         trace = MissionTrace(tuple(track), np.array(search.likelihood), np.array(puffs[:, :2]))
     estimate = search.estimate()
     on_source = within_one_cell(grid, estimate.x, estimate.y, *source)
+    speed = scenario.world.vehicle.speed_mps
     if declaration is None:
         return MissionResult(
             seed=seed,
@@ -261,6 +264,7 @@ def run_mission(
             first_detection_s=first_detection,
             reached_s=reached,
             estimate_on_source=on_source,
+            vehicle_speed_mps=speed,
             trace=trace,
         )
     return MissionResult(
@@ -279,6 +283,7 @@ def run_mission(
         estimate_on_source=on_source,
         confidence=declaration.confidence,
         radius_m=declaration.radius_m,
+        vehicle_speed_mps=speed,
         trace=trace,
     )
 

@@ -236,6 +236,70 @@ class Calibration:
         )
 
 
+SPEED_BANDS = (0.0, 1.0, 1.5)
+"""Lower edges of the vehicle-speed bands (m/s) the summary splits success by: the time limits
+shrink with the speed, the map's learning does not speed up with it (one observation a second)."""
+
+
+@dataclass(frozen=True)
+class SpeedBand:
+    """The missions flown at ``lower`` <= vehicle speed < ``upper`` (m/s), and how many succeeded."""
+
+    lower: float
+    upper: float
+    missions: int = 0
+    successes: int = 0
+
+    def __add__(self, other: SpeedBand) -> SpeedBand:
+        if (self.lower, self.upper) != (other.lower, other.upper):
+            raise ValueError("bands with different edges do not add")
+        return replace(
+            self, missions=self.missions + other.missions, successes=self.successes + other.successes
+        )
+
+    @property
+    def success_rate(self) -> float | None:
+        return self.successes / self.missions if self.missions else None
+
+    def label(self) -> str:
+        if self.lower <= 0.0:
+            return f"< {self.upper:g} m/s"
+        return f">= {self.lower:g} m/s" if math.isinf(self.upper) else f"{self.lower:g}-{self.upper:g} m/s"
+
+    def as_row(self) -> dict[str, Any]:
+        upper = None if math.isinf(self.upper) else self.upper
+        return {"speed_from_mps": self.lower, "speed_to_mps": upper, "missions": self.missions,
+                "success_rate": self.success_rate}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Speeds:
+    """Success by the vehicle's speed (``SPEED_BANDS``); missions of unknown speed are left out."""
+
+    bands: tuple[SpeedBand, ...] = field(
+        default_factory=lambda: tuple(
+            SpeedBand(lower, upper)
+            for lower, upper in zip(SPEED_BANDS, (*SPEED_BANDS[1:], math.inf), strict=True)
+        )
+    )
+
+    @classmethod
+    def of(cls, results: Sequence[MissionResult]) -> Speeds:
+        def counted(band: SpeedBand) -> SpeedBand:
+            inside = [r for r in results if r.vehicle_speed_mps is not None
+                      and band.lower <= r.vehicle_speed_mps < band.upper]  # fmt: skip
+            return replace(band, missions=len(inside), successes=sum(r.correct for r in inside))
+
+        return cls(tuple(counted(band) for band in cls().bands))
+
+    def __add__(self, other: Speeds) -> Speeds:
+        return Speeds(tuple(a + b for a, b in zip(self.bands, other.bands, strict=True)))
+
+    def line(self) -> str:
+        parts = [f"{b.label()} {_percent(b.success_rate)} of {b.missions}" for b in self.bands if b.missions]
+        return "by vehicle speed: " + ("; ".join(parts) if parts else "-")
+
+
 @dataclass(frozen=True)
 class ClassSummary:
     """One class's figures over its missions."""
@@ -252,6 +316,7 @@ class ClassSummary:
     median_path_m: float
     failures: dict[FailureClass, int] = field(default_factory=dict)
     calibration: Calibration = field(default_factory=Calibration)
+    speeds: Speeds = field(default_factory=Speeds)
 
     def line(self) -> str:
         """The class's row of the text table (columns of ``HEADER``)."""
@@ -297,6 +362,7 @@ def summarise_class(name: str, outcomes: Sequence[tuple[MissionResult, float]]) 
         median_path_m=float(np.median([r.path_m for r in results])),
         failures={kind: failures.count(kind) for kind in FailureClass},
         calibration=Calibration.of(results),
+        speeds=Speeds.of(results),
     )
 
 
@@ -311,12 +377,15 @@ class SuiteSummary:
     missions_per_s: float
     elapsed_s: float
     calibration: Calibration = field(default_factory=Calibration)
+    speeds: Speeds = field(default_factory=Speeds)
 
     def line(self) -> str:
         return (
             self.calibration.table()
             + "\n"
             + self.calibration.line()
+            + "\n"
+            + self.speeds.line()
             + "\n"
             + (
                 f"summary: worst class {self.worst_class} {self.worst_success_rate:.1%}; wrong declarations "
@@ -337,6 +406,7 @@ class SuiteSummary:
         row["declarations_at_95"] = c.high
         row["within_stated_radius_rate_at_95"] = c.high_within / c.high if c.high else None
         row["calibration_bands"] = [band.as_row() for band in c.bands]
+        row["speed_bands"] = [band.as_row() for band in self.speeds.bands]
         return row
 
 
@@ -352,6 +422,7 @@ def summarise_suite(classes: Sequence[ClassSummary], elapsed_s: float) -> SuiteS
         missions_per_s=missions / elapsed_s if elapsed_s > 0 else math.inf,
         elapsed_s=elapsed_s,
         calibration=sum((c.calibration for c in classes), Calibration()),
+        speeds=sum((c.speeds for c in classes), Speeds()),
     )
 
 

@@ -208,3 +208,38 @@ def test_a_time_scale_stretches_every_limit_and_says_it_is_a_diagnostic(
         main([*command, "--time-scale", "0"])
     with pytest.raises(ValueError, match="time_scale"):
         suite.class_missions([Path(steady)], 1, 0, None, (), time_scale=float("nan"))
+
+
+def test_success_is_split_by_the_vehicle_speed() -> None:
+    def flown(speed: float | None, correct: bool) -> MissionResult:
+        return MissionResult(0, 0.0, 0.0, correct, correct, 10.0, None, None, None, 10.0, 1.0,
+                             vehicle_speed_mps=speed)  # fmt: skip
+
+    results = [flown(0.5, True), flown(0.99, False), flown(1.0, True), flown(1.6, False), flown(2.0, True),
+               flown(None, True)]  # fmt: skip
+    speeds = suite.Speeds.of(results)
+    assert [(b.label(), b.missions, b.successes) for b in speeds.bands] == [
+        ("< 1 m/s", 2, 1), ("1-1.5 m/s", 1, 1), (">= 1.5 m/s", 2, 1)
+    ]  # fmt: skip
+    assert speeds.line() == (
+        "by vehicle speed: < 1 m/s 50.0% of 2; 1-1.5 m/s 100.0% of 1; >= 1.5 m/s 50.0% of 2"
+    )
+    both = speeds + suite.Speeds.of(results[:1])
+    assert both.bands[0].missions == 3
+    assert both.bands[0].success_rate == pytest.approx(2 / 3)
+    outcomes = [(r, 300.0) for r in results]
+    total = suite.summarise_suite([suite.summarise_class("x", outcomes)], elapsed_s=1.0)
+    assert total.as_row()["speed_bands"] == [
+        {"speed_from_mps": 0.0, "speed_to_mps": 1.0, "missions": 2, "success_rate": 0.5},
+        {"speed_from_mps": 1.0, "speed_to_mps": 1.5, "missions": 1, "success_rate": 1.0},
+        {"speed_from_mps": 1.5, "speed_to_mps": None, "missions": 2, "success_rate": 0.5},
+    ]
+    assert "by vehicle speed: < 1 m/s 50.0% of 2" in total.line()
+    assert suite.Speeds().line() == "by vehicle speed: -"
+
+
+def test_a_suite_mission_knows_its_vehicle_speed() -> None:
+    steady = next(str(path) for path in suite.suite_classes() if path.stem == "steady")
+    drawn = suite.drawn_world(suite.SuiteMission(steady, 0))
+    result, _ = suite.run_suite_mission(suite.SuiteMission(steady, 0, time_scale=0.02))
+    assert result.vehicle_speed_mps == drawn.scenario.world.vehicle.speed_mps
