@@ -317,6 +317,8 @@ class ClassSummary:
     failures: dict[FailureClass, int] = field(default_factory=dict)
     calibration: Calibration = field(default_factory=Calibration)
     speeds: Speeds = field(default_factory=Speeds)
+    speed_drawn: bool = True
+    """Whether the class draws its vehicles' speed (the suite's split by speed counts only those)."""
 
     def line(self) -> str:
         """The class's row of the text table (columns of ``HEADER``)."""
@@ -342,10 +344,13 @@ class ClassSummary:
             "failures": {str(kind): self.failures.get(kind, 0) for kind in FailureClass},
             "declarations": self.calibration.declarations,
             "within_stated_radius": self.calibration.within,
+            "speed_bands": [band.as_row() for band in self.speeds.bands],
         }
 
 
-def summarise_class(name: str, outcomes: Sequence[tuple[MissionResult, float]]) -> ClassSummary:
+def summarise_class(
+    name: str, outcomes: Sequence[tuple[MissionResult, float]], *, speed_drawn: bool = True
+) -> ClassSummary:
     if not outcomes:
         raise ValueError("no missions to summarise")
     results = [r for r, _ in outcomes]
@@ -363,6 +368,7 @@ def summarise_class(name: str, outcomes: Sequence[tuple[MissionResult, float]]) 
         failures={kind: failures.count(kind) for kind in FailureClass},
         calibration=Calibration.of(results),
         speeds=Speeds.of(results),
+        speed_drawn=speed_drawn,
     )
 
 
@@ -378,6 +384,9 @@ class SuiteSummary:
     elapsed_s: float
     calibration: Calibration = field(default_factory=Calibration)
     speeds: Speeds = field(default_factory=Speeds)
+    """Success by the vehicle's speed over the classes that draw it (a class flown at one speed
+    would weigh its own difficulty into one band)."""
+    speed_classes: int = 0
 
     def line(self) -> str:
         return (
@@ -385,7 +394,7 @@ class SuiteSummary:
             + "\n"
             + self.calibration.line()
             + "\n"
-            + self.speeds.line()
+            + f"{self.speeds.line()} (classes that draw the speed: {self.speed_classes})"
             + "\n"
             + (
                 f"summary: worst class {self.worst_class} {self.worst_success_rate:.1%}; wrong declarations "
@@ -407,6 +416,7 @@ class SuiteSummary:
         row["within_stated_radius_rate_at_95"] = c.high_within / c.high if c.high else None
         row["calibration_bands"] = [band.as_row() for band in c.bands]
         row["speed_bands"] = [band.as_row() for band in self.speeds.bands]
+        row["speed_classes"] = self.speed_classes
         return row
 
 
@@ -422,7 +432,8 @@ def summarise_suite(classes: Sequence[ClassSummary], elapsed_s: float) -> SuiteS
         missions_per_s=missions / elapsed_s if elapsed_s > 0 else math.inf,
         elapsed_s=elapsed_s,
         calibration=sum((c.calibration for c in classes), Calibration()),
-        speeds=sum((c.speeds for c in classes), Speeds()),
+        speeds=sum((c.speeds for c in classes if c.speed_drawn), Speeds()),
+        speed_classes=sum(c.speed_drawn for c in classes),
     )
 
 
@@ -477,8 +488,9 @@ def run_suite(
         outcomes = _dask(specs, scheduler, progress)
     else:
         outcomes = in_order(run_suite_mission, specs, jobs, progress)
-    for name, _ in batches:
-        yield summarise_class(name, [next(outcomes) for _ in range(runs)])
+    for name, batch in batches:
+        low, high = _world_class(batch[0].class_path).world.vehicle.speed_mps
+        yield summarise_class(name, [next(outcomes) for _ in range(runs)], speed_drawn=high > low)
 
 
 def class_missions(

@@ -228,14 +228,25 @@ def test_success_is_split_by_the_vehicle_speed() -> None:
     assert both.bands[0].missions == 3
     assert both.bands[0].success_rate == pytest.approx(2 / 3)
     outcomes = [(r, 300.0) for r in results]
-    total = suite.summarise_suite([suite.summarise_class("x", outcomes)], elapsed_s=1.0)
+    fixed = suite.summarise_class("wang", [(flown(2.0, True), 300.0)] * 3, speed_drawn=False)
+    total = suite.summarise_suite([suite.summarise_class("x", outcomes), fixed], elapsed_s=1.0)
+    assert total.speed_classes == 1  # a class flown at one speed is left out of the split
+    assert fixed.as_row()["speed_bands"][-1]["missions"] == 3
     assert total.as_row()["speed_bands"] == [
         {"speed_from_mps": 0.0, "speed_to_mps": 1.0, "missions": 2, "success_rate": 0.5},
         {"speed_from_mps": 1.0, "speed_to_mps": 1.5, "missions": 1, "success_rate": 1.0},
         {"speed_from_mps": 1.5, "speed_to_mps": None, "missions": 2, "success_rate": 0.5},
     ]
     assert "by vehicle speed: < 1 m/s 50.0% of 2" in total.line()
+    assert "of 2 (classes that draw the speed: 1)" in total.line()
     assert suite.Speeds().line() == "by vehicle speed: -"
+
+
+def test_only_classes_that_draw_the_speed_are_split_by_it() -> None:
+    files = [path for path in suite.suite_classes() if path.stem in ("steady", "wang-laminar")]
+    steady, wang = suite.run_suite(files, 1, first_seed=0, jobs=1, time_scale=0.02)
+    assert (steady.name, steady.speed_drawn) == ("steady", True)
+    assert (wang.name, wang.speed_drawn) == ("wang-laminar", False)
 
 
 def test_a_suite_mission_knows_its_vehicle_speed() -> None:
