@@ -15,10 +15,10 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -113,6 +113,19 @@ CALIBRATION_BANDS = (0.0, 0.8, 0.85, 0.9, CALIBRATION_LEVEL)
 ``CALIBRATION_LEVEL`` up, is the issue's "declarations made at a stated 95 %"."""
 
 
+BandT = TypeVar("BandT", "Band", "SpeedBand")
+
+
+def _add_counts(a: BandT, b: BandT) -> BandT:
+    """Two bands of the same edges (``lower``, ``upper``) with every other field summed."""
+    if (a.lower, a.upper) != (b.lower, b.upper):
+        raise ValueError("bands with different edges do not add")
+    counts = {
+        f.name: getattr(a, f.name) + getattr(b, f.name) for f in fields(a) if f.name not in ("lower", "upper")
+    }
+    return replace(a, **counts)
+
+
 @dataclass(frozen=True)
 class Band:
     """The declarations stated at ``lower`` <= confidence < ``upper``: how many, what they stated in
@@ -125,14 +138,7 @@ class Band:
     within: int = 0
 
     def __add__(self, other: Band) -> Band:
-        if (self.lower, self.upper) != (other.lower, other.upper):
-            raise ValueError("bands with different edges do not add")
-        return replace(
-            self,
-            declarations=self.declarations + other.declarations,
-            confidence_sum=self.confidence_sum + other.confidence_sum,
-            within=self.within + other.within,
-        )
+        return _add_counts(self, other)
 
     @property
     def stated_mean(self) -> float | None:
@@ -251,11 +257,7 @@ class SpeedBand:
     successes: int = 0
 
     def __add__(self, other: SpeedBand) -> SpeedBand:
-        if (self.lower, self.upper) != (other.lower, other.upper):
-            raise ValueError("bands with different edges do not add")
-        return replace(
-            self, missions=self.missions + other.missions, successes=self.successes + other.successes
-        )
+        return _add_counts(self, other)
 
     @property
     def success_rate(self) -> float | None:
