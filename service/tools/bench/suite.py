@@ -168,9 +168,14 @@ def _percent(share: float | None) -> str:
     return "-" if share is None else f"{share:.1%}"
 
 
+def _banded(kind: Callable[[float, float], BandT], lowers: Sequence[float]) -> tuple[BandT, ...]:
+    """Empty bands from their lower edges, each up to the next; the last one has no upper edge."""
+    uppers = (*lowers[1:], math.inf)
+    return tuple(kind(lower, upper) for lower, upper in zip(lowers, uppers, strict=True))
+
+
 def _bands() -> tuple[Band, ...]:
-    uppers = (*CALIBRATION_BANDS[1:], math.inf)
-    return tuple(Band(lower, upper) for lower, upper in zip(CALIBRATION_BANDS, uppers, strict=True))
+    return _banded(Band, CALIBRATION_BANDS)
 
 
 @dataclass(frozen=True)
@@ -278,12 +283,7 @@ class SpeedBand:
 class Speeds:
     """Success by the vehicle's speed (``SPEED_BANDS``); missions of unknown speed are left out."""
 
-    bands: tuple[SpeedBand, ...] = field(
-        default_factory=lambda: tuple(
-            SpeedBand(lower, upper)
-            for lower, upper in zip(SPEED_BANDS, (*SPEED_BANDS[1:], math.inf), strict=True)
-        )
-    )
+    bands: tuple[SpeedBand, ...] = field(default_factory=lambda: _banded(SpeedBand, SPEED_BANDS))
 
     @classmethod
     def of(cls, results: Sequence[MissionResult]) -> Speeds:
@@ -292,7 +292,7 @@ class Speeds:
                       and band.lower <= r.vehicle_speed_mps < band.upper]  # fmt: skip
             return replace(band, missions=len(inside), successes=sum(r.correct for r in inside))
 
-        return cls(tuple(counted(band) for band in cls().bands))
+        return cls(tuple(counted(band) for band in _banded(SpeedBand, SPEED_BANDS)))
 
     def __add__(self, other: Speeds) -> Speeds:
         return Speeds(tuple(a + b for a, b in zip(self.bands, other.bands, strict=True)))
