@@ -371,6 +371,21 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
         "that succeed were slow, the others stuck); default 1: the suite",
     )
 
+    w.add_argument(
+        "--missions",
+        default=None,
+        metavar="FILE",
+        help="also write one JSON line per mission here (class, seed, outcome), for oslim bench compare",
+    )
+
+    c = kinds.add_parser(
+        "compare",
+        help="two suite runs (--missions files) mission by mission: a change beyond the seeds' noise?",
+    )
+    c.add_argument("a", metavar="A", help="missions file of the first run (the baseline)")
+    c.add_argument("b", metavar="B", help="missions file of the second run (the change)")
+    c.add_argument("--json", action="store_true", help='one JSON object per class, then class "all"')
+
     r = kinds.add_parser(
         "model", help="the mapper's P(detection) at the true source against the detector, by position"
     )

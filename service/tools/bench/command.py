@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from service.tools.bench import mapping, search, suite
+from service.tools.bench import compare, mapping, search, suite
 from service.tools.progress import progress_bar
 from sim_bridge.scenarios import load_scenario
 
@@ -33,6 +33,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_estimate(args)
     if args.bench == "phases":
         return _run_phases(args)
+    if args.bench == "compare":
+        return _run_compare(args)
     raise AssertionError(args.bench)
 
 
@@ -323,6 +325,8 @@ def _run_suite(args: argparse.Namespace) -> int:
             flush=True,
         )
         print(suite.HEADER, flush=True)
+    if args.missions:
+        Path(args.missions).write_text("", encoding="utf-8")  # this run's missions only
     with progress_bar(args.runs * len(files), quiet=args.json) as progress:
         for row in suite.timed(
             suite.run_suite(
@@ -336,4 +340,27 @@ def _run_suite(args: argparse.Namespace) -> int:
                 _print_json(row.as_row(), args.oracle_declaration, args.time_scale)
             else:
                 print(row.line(), flush=True)
+            if args.missions and isinstance(row, suite.ClassSummary):
+                compare.write_missions(
+                    args.missions, (compare.mission_row(row.name, r, limit) for r, limit in row.outcomes)
+                )
+    return 0
+
+
+def _run_compare(args: argparse.Namespace) -> int:
+    try:
+        result = compare.compare(compare.load_missions(args.a), compare.load_missions(args.b))
+    except (OSError, ValueError) as e:
+        raise SystemExit(f"oslim bench compare: {e}") from None
+    if args.json:
+        for paired in (*result.classes, result.total):
+            print(json.dumps({**paired.as_row(), "only_a": result.only_a, "only_b": result.only_b}))
+        return 0
+    print(
+        f"A {args.a}, B {args.b}: {result.total.missions} missions paired by class and seed "
+        f"(unpaired: {result.only_a} in A, {result.only_b} in B); d time: median of B's time less A's "
+        "where both succeeded; p: exact sign test over the missions that changed"
+    )
+    for line in result.lines():
+        print(line)
     return 0

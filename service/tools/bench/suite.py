@@ -321,6 +321,8 @@ class ClassSummary:
     speeds: Speeds = field(default_factory=Speeds)
     speed_drawn: bool = True
     """Whether the class draws its vehicles' speed (the suite's split by speed counts only those)."""
+    outcomes: tuple[tuple[MissionResult, float], ...] = field(default=(), repr=False, compare=False)
+    """Each mission and its time limit, in seed order (``oslim bench suite --missions``)."""
 
     def line(self) -> str:
         """The class's row of the text table (columns of ``HEADER``)."""
@@ -371,6 +373,7 @@ def summarise_class(
         calibration=Calibration.of(results),
         speeds=Speeds.of(results),
         speed_drawn=speed_drawn,
+        outcomes=tuple(outcomes),
     )
 
 

@@ -1,0 +1,126 @@
+"""``oslim bench compare``: two suite runs paired mission by mission, with an exact sign test."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from service.cli import main
+from service.tools.bench import compare
+from service.tools.bench.search import MissionResult
+
+
+def _write(path: Path, outcomes: dict[tuple[str, int], tuple[bool, bool, float]]) -> Path:
+    """A missions file: (class, seed) -> (correct, wrong, time_s)."""
+    rows = [
+        {"class": name, "seed": seed, "correct": ok, "wrong": wrong, "time_s": t}
+        for (name, seed), (ok, wrong, t) in outcomes.items()
+    ]
+    path.write_text("".join(json.dumps(row) + "\n" for row in rows), encoding="utf-8")
+    return path
+
+
+def test_the_sign_test_is_the_exact_binomial_tail() -> None:
+    assert compare.sign_test(0, 0) == 1.0
+    # six changed missions all lost: 2 x (1/2)^6
+    assert compare.sign_test(0, 6) == pytest.approx(2 / 64)
+    # 1 gained, 5 lost: 2 x (1 + 6) / 64
+    assert compare.sign_test(1, 5) == pytest.approx(14 / 64)
+    assert compare.sign_test(3, 3) == pytest.approx(1.0)
+
+
+def test_missions_are_paired_by_class_and_seed(tmp_path: Path) -> None:
+    a = _write(tmp_path / "a.jsonl", {
+        ("steady", 0): (True, False, 100.0), ("steady", 1): (False, False, 300.0),
+        ("steady", 2): (True, False, 120.0), ("patchy", 0): (False, True, 90.0),
+        ("patchy", 1): (False, False, 400.0), ("patchy", 9): (True, False, 50.0),
+    })  # fmt: skip
+    b = _write(tmp_path / "b.jsonl", {
+        ("steady", 0): (True, False, 90.0), ("steady", 1): (True, False, 250.0),
+        ("steady", 2): (False, False, 300.0), ("patchy", 0): (True, False, 80.0),
+        ("patchy", 1): (True, False, 200.0), ("slow-flow", 0): (True, False, 10.0),
+    })  # fmt: skip
+    result = compare.compare(compare.load_missions(a), compare.load_missions(b))
+    assert (result.only_a, result.only_b) == (1, 1)
+    patchy, steady = result.classes
+    assert (patchy.name, patchy.missions, patchy.a, patchy.b, patchy.gained, patchy.lost) == (
+        "patchy",
+        2,
+        0,
+        2,
+        2,
+        0,
+    )
+    assert (patchy.wrong_a, patchy.wrong_b) == (1, 0)
+    assert patchy.time_change_s is None  # no mission succeeded on both sides
+    assert (steady.a, steady.b, steady.gained, steady.lost) == (2, 2, 1, 1)
+    assert steady.time_change_s == pytest.approx(-10.0)
+    total = result.total
+    assert (total.missions, total.gained, total.lost) == (5, 3, 1)
+    assert total.p_value == pytest.approx(compare.sign_test(3, 1))
+    assert result.worst("a") == ("patchy", 0.0)
+    assert "within the noise" in result.verdict()
+
+
+def test_a_one_sided_change_is_beyond_the_noise(tmp_path: Path) -> None:
+    a = _write(tmp_path / "a.jsonl", {("steady", s): (False, False, 300.0) for s in range(8)})
+    b = _write(tmp_path / "b.jsonl", {("steady", s): (True, False, 100.0) for s in range(8)})
+    result = compare.compare(compare.load_missions(a), compare.load_missions(b))
+    assert result.total.p_value == pytest.approx(2 / 256)
+    assert "beyond the noise" in result.verdict()
+
+
+def test_a_broken_file_is_refused_with_its_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    good = _write(tmp_path / "good.jsonl", {("steady", 0): (True, False, 100.0)})
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text(
+        '{"class": "steady", "seed": 0, "correct": true, "wrong": false, "time_s": 1}\n{"seed": 1}\n'
+    )
+    with pytest.raises(SystemExit, match=r"bad.jsonl, line 2: not a mission line"):
+        main(["bench", "compare", str(good), str(bad)])
+    other = _write(tmp_path / "other.jsonl", {("patchy", 0): (True, False, 100.0)})
+    with pytest.raises(SystemExit, match="no mission"):
+        main(["bench", "compare", str(good), str(other)])
+    twice = tmp_path / "twice.jsonl"
+    twice.write_text((good.read_text()) * 2)
+    with pytest.raises(SystemExit, match="appears twice"):
+        main(["bench", "compare", str(good), str(twice)])
+
+
+def test_a_mission_line_carries_the_outcome() -> None:
+    result = MissionResult(7, 0.0, 0.0, True, False, 80.0, 5.0, 5.0, 7.1, 120.0, 30.0, confidence=0.9,
+                           radius_m=3.0, vehicle_speed_mps=1.2)  # fmt: skip
+    row = compare.mission_row("meander", result, 250.0)
+    assert row["class"] == "meander"
+    assert row["seed"] == 7
+    assert row["wrong"] is True
+    assert row["correct"] is False
+    assert row["failure"] == "wrong"
+    assert row["limit_s"] == 250.0
+    assert row["vehicle_speed_mps"] == 1.2
+    json.dumps(row)  # a JSON line
+
+
+def test_the_suite_writes_its_missions_for_compare(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A suite run with --missions, compared with itself: every mission pairs and none changes."""
+    missions = tmp_path / "missions.jsonl"
+    missions.write_text("stale\n")  # a rerun starts the file anew
+    assert main(["bench", "suite", "--runs", "2", "--class", "steady", "--jobs", "1", "--json",
+                 "--missions", str(missions)]) == 0  # fmt: skip
+    suite_rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    rows = [json.loads(line) for line in missions.read_text().splitlines()]
+    assert [(r["class"], r["seed"]) for r in rows] == [("steady", 0), ("steady", 1)]
+    assert sum(r["correct"] for r in rows) / 2 == suite_rows[0]["success_rate"]
+    assert main(["bench", "compare", str(missions), str(missions), "--json"]) == 0
+    steady, total = (json.loads(line) for line in capsys.readouterr().out.splitlines())
+    assert steady["class"] == "steady"
+    assert total["class"] == "all"
+    assert (total["missions"], total["gained"], total["lost"], total["p_value"]) == (2, 0, 0, 1.0)
+    assert main(["bench", "compare", str(missions), str(missions)]) == 0
+    text = capsys.readouterr().out
+    assert "2 missions paired" in text
+    assert "verdict: B - A = +0 of 2 missions" in text
