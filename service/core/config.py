@@ -90,7 +90,7 @@ class SensorConfig(_Section):
     name: str = Field(default="CHEM", min_length=1, max_length=10)
     threshold: float = Field(default=1.0, ge=0)
     detection_probability: float = Field(default=0.9, gt=0, le=1)
-    false_alarm_probability: float = Field(default=0.1, ge=0, lt=1)
+    false_alarm_probability: float = Field(default=0.02, ge=0, lt=1)
     miss_floor: float = Field(default=0.3, ge=0, lt=1)
     detection_name: str = Field(default="CHEM_DET", min_length=1, max_length=10)
     max_flow_mps: float = Field(default=20.0, gt=0)
@@ -111,6 +111,7 @@ class MappingConfig(_Section):
     zero_lag: bool = True
     footprint_m: float = Field(default=0.8, ge=0)
     footprint_growth: float = Field(default=0.1, ge=0)
+    wide_share: float = Field(default=0.3, ge=0, le=1)
     prehistory: bool = True
     epsilon_d: float = Field(default=0.2, gt=0, lt=1)
     epsilon_c: float = Field(default=0.02, gt=0, lt=1)

@@ -24,16 +24,18 @@ from typing import ClassVar
 import numpy as np
 
 from service.core.mapping.belief import FloatArray
-from service.core.mapping.mapper import ObservationModelMapper
+from service.core.mapping.mapper import WIDE_SPREAD, ObservationModelMapper
 
 
 class BayesMapper(ObservationModelMapper):
     name: ClassVar[str] = "bayes"
 
-    def event_likelihood(self, cell: int, at: tuple[float, float] | None = None) -> FloatArray:
+    def event_likelihood(
+        self, cell: int, at: tuple[float, float] | None = None, spread: float = 1.0
+    ) -> FloatArray:
         """L_i of eq. 5 for a vehicle in flat cell ``cell`` (at ``at`` in it): expected filaments
-        there, shape (n, m)."""
-        px, py = self._filament_factors(cell, at)
+        there, with their random walk ``spread`` times sigma, shape (n, m)."""
+        px, py = self._filament_factors(cell, at, spread)
         # eq. 5: pi_i = sum_l P_i(t_l), with P_i(t_l) = py_l(row) px_l(col)
         out: FloatArray = py.T @ px
         return out
@@ -41,10 +43,15 @@ class BayesMapper(ObservationModelMapper):
     def _event_probability(
         self, cell: int, detected: bool, at: tuple[float, float] | None = None
     ) -> FloatArray:
-        """P(d | i) = pf + (1 - pf) mu q_i, or P(no d | i) = (1 - pf)(1 - mu q_i), shape (n, m)."""
+        """P(d | i) = pf + (1 - pf) mu q_i, or P(no d | i) = (1 - pf)(1 - mu q_i), shape (n, m); q_i
+        mixed with the wide plume's by eq. W1 when ``wide_share`` > 0."""
         p = self.params
+        q = np.minimum(self.event_likelihood(cell, at), 1.0)
+        if p.wide_share > 0.0:
+            wide = np.minimum(self.event_likelihood(cell, at, WIDE_SPREAD), 1.0)
+            q = (1.0 - p.wide_share) * q + p.wide_share * wide
         # the miss floor r caps what odour in the cell promises: P(no d | i) >= (1 - pf) r
-        seen = (1.0 - p.miss_floor) * p.mu * np.minimum(self.event_likelihood(cell, at), 1.0)
+        seen = (1.0 - p.miss_floor) * p.mu * q
         out: FloatArray = (
             p.false_alarm + (1.0 - p.false_alarm) * seen if detected else (1.0 - p.false_alarm) * (1.0 - seen)
         )

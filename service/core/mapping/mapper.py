@@ -60,6 +60,10 @@ class MapperParams:
     eq. F1-F2; Bayesian and POMDP mappers)."""
     footprint_growth: float = 0.0
     """g (m^2/s): a filament's detection radius is sqrt(r0^2 + g tau) at age tau (eq. F1)."""
+    wide_share: float = 0.0
+    """w: the share of ticks whose odour reaches the vehicle through a plume ``WIDE_SPREAD`` times as
+    wide as sigma says (a meander, a patchy puff that spread fast) rather than the narrow one
+    (Bayesian and POMDP mappers; 0: the papers' single plume). See ``ObservationModelMapper``."""
     prehistory: bool = False
     """The release began before the service: continue the flow record back with its mean step
     until every source in the area is in reach (``filament.release_offsets``; Bayesian and POMDP
@@ -83,6 +87,8 @@ class MapperParams:
                 "footprint_m and footprint_growth must be >= 0, "
                 f"got {self.footprint_m}, {self.footprint_growth}"
             )
+        if not 0 <= self.wide_share <= 1:
+            raise ValueError(f"wide_share must be in [0, 1], got {self.wide_share}")
         if not 0 <= self.miss_floor < 1:
             raise ValueError(f"miss_floor must be in [0, 1), got {self.miss_floor}")
         if not (0 < self.epsilon_d < 1 and 0 < self.epsilon_c < 1):
@@ -102,6 +108,7 @@ class MapperParams:
             zero_lag=m.zero_lag,
             footprint_m=m.footprint_m,
             footprint_growth=m.footprint_growth,
+            wide_share=m.wide_share,
             prehistory=m.prehistory,
             epsilon_d=m.epsilon_d,
             epsilon_c=m.epsilon_c,
@@ -272,22 +279,36 @@ class SourceMapper(ABC):
         give."""
 
 
+WIDE_SPREAD = 3.0
+"""How many times faster than sigma the wide plume of ``wide_share`` spreads: the suite's patchy and
+meandering plumes random-walk at 0.4-0.8 m/sqrt(s) against the model's 0.2."""
+
+
 class ObservationModelMapper(SourceMapper):
     """A mapper that fuses each event by Bayes' rule through its own observation model
-    P(event | source in each cell): the Bayesian and POMDP mappers differ only in that model."""
+    P(event | source in each cell): the Bayesian and POMDP mappers differ only in that model.
+
+    With ``wide_share`` w > 0 the odour of a tick reaches the vehicle through the narrow plume of
+    sigma with probability 1 - w and through a plume ``WIDE_SPREAD`` times as wide with probability
+    w, so that P(no odour | i) = (1 - w) gamma_narrow + w gamma_wide        (two-plume eq. W1)
+    with each gamma the method's own. A detection beside the narrow plume, common in a meandering
+    or patchy one, is then explained by the sources upflow of it within the wide plume instead of
+    by the false-alarm rate anywhere; and a miss beside the narrow plume weighs little against them.
+    """
 
     def _filament_factors(
-        self, cell: int, at: tuple[float, float] | None = None
+        self, cell: int, at: tuple[float, float] | None = None, spread: float = 1.0
     ) -> tuple[FloatArray, FloatArray]:
         """Px (W, m) and Py (W, n): one filament per release time of the window, seen from ``cell``
-        (from the position ``at`` in it, with a footprint; its centre otherwise)."""
+        (from the position ``at`` in it, with a footprint; its centre otherwise), its random walk
+        ``spread`` times sigma."""
         p = self.params
         return history_factors(
             self.grid,
             cell,
             self.history,
-            p.sigma_x,
-            p.sigma_y,
+            p.sigma_x * spread,
+            p.sigma_y * spread,
             zero_lag=p.zero_lag,
             reach_m=self._reach_m if p.prehistory else 0.0,
             footprint_m=p.footprint_m,

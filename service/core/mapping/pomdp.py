@@ -23,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from service.core.mapping.belief import FloatArray
-from service.core.mapping.mapper import ObservationModelMapper
+from service.core.mapping.mapper import WIDE_SPREAD, ObservationModelMapper
 
 SERIES_TOLERANCE = 1e-12
 """Bound on the truncation error of log gamma per release time (so about window x this in all)."""
@@ -98,22 +98,34 @@ def log_non_detection(px: FloatArray, py: FloatArray, mu: float) -> FloatArray:
 class PomdpMapper(ObservationModelMapper):
     name: ClassVar[str] = "pomdp"
 
-    def log_gamma(self, cell: int, at: tuple[float, float] | None = None) -> FloatArray:
+    def log_gamma(self, cell: int, at: tuple[float, float] | None = None, spread: float = 1.0) -> FloatArray:
         """log gamma_ij (eq. 2) for a vehicle in flat cell ``cell`` (at ``at`` in it), over the
-        window, shape (n, m)."""
+        window, with the filaments' random walk ``spread`` times sigma, shape (n, m)."""
         p = self.params
-        px, py = self._filament_factors(cell, at)
+        px, py = self._filament_factors(cell, at, spread)
         return log_non_detection(px, py, p.mu)
+
+    def _floored_gamma(self, cell: int, at: tuple[float, float] | None, spread: float) -> FloatArray:
+        """gamma' = r + (1 - r) gamma, with r the miss floor."""
+        r = self.params.miss_floor
+        out: FloatArray = r + (1.0 - r) * np.exp(self.log_gamma(cell, at, spread))
+        return out
 
     def _event_probability(
         self, cell: int, detected: bool, at: tuple[float, float] | None = None
     ) -> FloatArray:
         """O(d) = 1 - (1 - pf) gamma' or O(no d) = (1 - pf) gamma' (eq. 3 with false alarms), where
-        gamma' = r + (1 - r) gamma with r the miss floor (gamma' = gamma, the paper's, for r = 0)."""
+        gamma' = r + (1 - r) gamma with r the miss floor (gamma' = gamma, the paper's, for r = 0),
+        mixed with the wide plume's by eq. W1 when ``wide_share`` > 0."""
         p = self.params
-        log_gamma = self.log_gamma(cell, at)
-        if p.miss_floor > 0.0:
-            log_gamma = np.log(p.miss_floor + (1.0 - p.miss_floor) * np.exp(log_gamma))
+        if p.wide_share > 0.0:
+            w = p.wide_share
+            narrow = self._floored_gamma(cell, at, 1.0)
+            log_gamma = np.log((1.0 - w) * narrow + w * self._floored_gamma(cell, at, WIDE_SPREAD))
+        else:
+            log_gamma = self.log_gamma(cell, at)
+            if p.miss_floor > 0.0:
+                log_gamma = np.log(p.miss_floor + (1.0 - p.miss_floor) * np.exp(log_gamma))
         log_miss = np.log1p(-p.false_alarm) + log_gamma
         out: FloatArray = -np.expm1(log_miss) if detected else np.exp(log_miss)
         return out

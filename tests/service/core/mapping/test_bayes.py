@@ -6,7 +6,7 @@ import numpy as np
 from service.core.grid import Grid
 from service.core.mapping import MAPPERS, make_mapper
 from service.core.mapping.bayes import BayesMapper
-from service.core.mapping.mapper import MapperParams
+from service.core.mapping.mapper import WIDE_SPREAD, MapperParams
 from service.core.observation import Observation
 
 SMALL = Grid(0.0, 12.0, 0.0, 8.0, columns=6, rows=4)
@@ -106,3 +106,20 @@ def test_non_detection_removes_mass_just_upflow() -> None:
         assert pi[row, col - upflow] < pi[row, col + upflow]
     assert pi[row, col + 10] > uniform  # downflow cells cannot explain a miss: they gain
     assert pi[row + 20, col] > uniform  # nor can cells far across the flow
+
+
+def test_a_wide_share_mixes_the_capped_counts_of_two_plumes() -> None:
+    """Two-plume eq. W1 in the Bayesian model: q = (1 - w) min(1, L_narrow) + w min(1, L_wide), with
+    L the eq. 5 count of a plume spreading at sigma and at WIDE_SPREAD x sigma."""
+    w = 0.3
+    params = MapperParams(window=20, sigma_x=0.3, sigma_y=0.3, mu=0.8, false_alarm=0.01, wide_share=w)
+    obs = [Observation(float(t), -10.0, -60.0, 0.2, 0.1, False) for t in range(15)]
+    obs.append(Observation(15.0, 6.5, 3.5, 0.2, 0.1, True))
+    mapper = BayesMapper(SMALL, params)
+    for o in obs:
+        mapper.update(o)
+    narrow = np.minimum(expected_filaments(SMALL, obs, 20, 0.3, 0.3), 1.0)
+    wide = np.minimum(expected_filaments(SMALL, obs, 20, 0.3 * WIDE_SPREAD, 0.3 * WIDE_SPREAD), 1.0)
+    assert not np.allclose(narrow, wide)
+    hit = 0.01 + 0.99 * 0.8 * ((1.0 - w) * narrow + w * wide)
+    np.testing.assert_allclose(mapper.likelihood, hit / hit.sum(), rtol=1e-12)

@@ -1,5 +1,6 @@
 import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -8,7 +9,7 @@ from service.core.grid import Grid
 from service.core.mapping import MAPPERS, make_mapper
 from service.core.mapping.bayes import BayesMapper
 from service.core.mapping.filament import filament_factors
-from service.core.mapping.mapper import MapperParams
+from service.core.mapping.mapper import WIDE_SPREAD, MapperParams
 from service.core.mapping.pomdp import WHOLE_DIRECT_SIZE, PomdpMapper, log_non_detection, series_terms
 from service.core.observation import Observation
 
@@ -181,3 +182,55 @@ def test_agrees_with_bayes_where_filaments_are_unlikely() -> None:
     assert faint.sum() > 100
     np.testing.assert_allclose(hit_pomdp[faint], hit_bayes[faint], rtol=2e-3)
     assert (hit_pomdp <= hit_bayes + 1e-15).all()  # 1 - prod(1 - x_l) <= sum x_l
+
+
+@pytest.mark.parametrize("detected", [True, False])
+def test_a_wide_share_mixes_the_narrow_and_the_wide_plume(detected: bool) -> None:
+    """Two-plume eq. W1: P(no odour | i) = (1 - w) gamma'_narrow + w gamma'_wide, each gamma' the
+    eq. 2 product of a plume (sigma, then WIDE_SPREAD x sigma) with the miss floor r."""
+    w, r, pf = 0.3, 0.3, 0.02
+    base = MapperParams(window=12, sigma_x=0.3, sigma_y=0.3, mu=0.9, false_alarm=pf, miss_floor=r)
+    mixed = PomdpMapper(FIELD, replace(base, wide_share=w))
+    history_then(mixed, 12, (1.0, 0.2))
+    cell = FIELD.cell_of(61.0, 1.0)
+    for spread, mapper in ((1.0, "narrow"), (WIDE_SPREAD, "wide")):
+        # the same history under a single plume of that spread, by eq. 2 directly
+        single = PomdpMapper(FIELD, replace(base, sigma_x=0.3 * spread, sigma_y=0.3 * spread))
+        history_then(single, 12, (1.0, 0.2))
+        floored = r + (1.0 - r) * np.exp(single.log_gamma(cell))
+        if mapper == "narrow":
+            narrow = floored
+        else:
+            wide = floored
+    assert (wide > narrow + 1e-3).any()  # the plumes differ
+    assert (narrow > wide + 1e-3).any()
+    no_odour = (1.0 - pf) * ((1.0 - w) * narrow + w * wide)
+    expected = 1.0 - no_odour if detected else no_odour
+    np.testing.assert_allclose(mixed._event_probability(cell, detected), expected, rtol=1e-12)
+    # w = 0 is the single narrow plume
+    alone = PomdpMapper(FIELD, base)
+    history_then(alone, 12, (1.0, 0.2))
+    np.testing.assert_allclose(
+        alone._event_probability(cell, detected),
+        1.0 - (1.0 - pf) * narrow if detected else (1.0 - pf) * narrow,
+        rtol=1e-12,
+    )
+
+
+def test_a_detection_beside_the_narrow_plume_points_upflow_with_a_wide_share() -> None:
+    """A detection 3 m across the flow from the narrow plume's line of a source: without the wide
+    plume only the false-alarm rate explains it for that source; with it, the source gains."""
+    params = MapperParams(window=40, sigma_x=0.2, sigma_y=0.2, false_alarm=0.02, miss_floor=0.3,
+                          footprint_m=0.8, footprint_growth=0.1)  # fmt: skip
+    cell = FIELD.cell_of(61.0, 1.0)
+    gains = []
+    for w in (0.0, 0.3):
+        mapper = PomdpMapper(FIELD, replace(params, wide_share=w))
+        history_then(mapper, 40, (1.0, 0.0))
+        hit = mapper._event_probability(cell, True, at=(61.0, 1.0))
+        row, col = FIELD.row_col(cell)
+        # a source 20 m upflow, 3 m across (the rows are 2 m: between one and two rows over)
+        beside, on_line = hit[row + 2, col - 10], hit[row, col - 10]
+        gains.append(beside / hit.min())
+        assert on_line > beside
+    assert gains[1] > 2.0 * gains[0]

@@ -196,12 +196,12 @@ def test_command_prints_one_json_object_per_configuration(capsys: pytest.Capture
 
 def test_oracle_declaration_ignores_a_wrong_declaration() -> None:
     # farrell2003 seed 0 with every guard of the declaration off but the mass (and that at 0.5) names
-    # (59.375, -3.5), 40 m from the source; the perfect guard ignores that cell and goes on
+    # (50.625, -3.5), 31 m from the source; the perfect guard ignores that cell and goes on
     unguarded = ["declaration.check_width_m=0", "declaration.upflow_pass_m=0", "declaration.probability=0.5"]
     scenario = search.configure("farrell2003", "pomdp", "astar", unguarded)
     plain = run_mission(scenario, 0, max_time_s=120.0)
     assert plain.wrong
-    assert plain.declared_x == pytest.approx(59.375)
+    assert plain.declared_x == pytest.approx(50.625)
     oracle = run_mission(scenario, 0, max_time_s=120.0, oracle=True)
     assert not oracle.wrong
     if oracle.declared_x is not None and oracle.declared_y is not None:
