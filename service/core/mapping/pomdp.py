@@ -122,10 +122,10 @@ class PomdpMapper(ObservationModelMapper):
             w = p.wide_share
             narrow = self._floored_gamma(cell, at, 1.0)
             log_gamma = np.log((1.0 - w) * narrow + w * self._floored_gamma(cell, at, WIDE_SPREAD))
+        elif p.miss_floor > 0.0:
+            log_gamma = np.log(self._floored_gamma(cell, at, 1.0))
         else:
-            log_gamma = self.log_gamma(cell, at)
-            if p.miss_floor > 0.0:
-                log_gamma = np.log(p.miss_floor + (1.0 - p.miss_floor) * np.exp(log_gamma))
+            log_gamma = self.log_gamma(cell, at)  # no floor: log gamma as is (gamma may be 0)
         log_miss = np.log1p(-p.false_alarm) + log_gamma
         out: FloatArray = -np.expm1(log_miss) if detected else np.exp(log_miss)
         return out
