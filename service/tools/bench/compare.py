@@ -8,6 +8,11 @@ Under "no difference" each changed mission is as likely gained as lost, so the n
 the n changed is Binomial(n, 1/2), and the exact two-sided sign test (McNemar's test on paired
 outcomes) gives the chance of a split at least as uneven. A gain whose p is large is within the
 noise of these seeds, however large it looks in percent.
+
+Time is judged the same way, over the missions both sides succeeded in: each pair's difference in
+time to the declaration, and the exact two-sided Wilcoxon signed-rank test of those differences
+(ties at zero left out), so that a change meant to save time is not taken for one by the seeds'
+luck either.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.stats import binomtest
+from scipy.stats import binomtest, wilcoxon
 
 from service.tools.bench.search import MissionResult
 
@@ -85,6 +90,13 @@ def sign_test(gained: int, lost: int) -> float:
     return 1.0 if changed == 0 else float(binomtest(gained, changed, 0.5).pvalue)
 
 
+def signed_rank_test(differences: Sequence[float]) -> float:
+    """Two-sided p of the Wilcoxon signed-rank test of paired ``differences`` against a median of
+    0, zeros left out; 1 when none is left."""
+    changed = [d for d in differences if d != 0.0]
+    return 1.0 if not changed else float(wilcoxon(changed).pvalue)
+
+
 @dataclass(frozen=True)
 class Paired:
     """One class (or all of them) over the missions both files flew."""
@@ -101,6 +113,10 @@ class Paired:
     wrong_b: int
     time_change_s: float | None
     """Median of B's time less A's, over the missions both succeeded in."""
+    time_p_value: float = 1.0
+    """Signed-rank p of those time differences (``signed_rank_test``)."""
+    both: int = 0
+    """Missions both succeeded in."""
 
     @property
     def p_value(self) -> float:
@@ -119,6 +135,8 @@ class Paired:
             wrong_a=sum(bool(a["wrong"]) for a, _ in pairs),
             wrong_b=sum(bool(b["wrong"]) for _, b in pairs),
             time_change_s=float(np.median(both)) if both else None,
+            time_p_value=signed_rank_test(both),
+            both=len(both),
         )
 
     def line(self) -> str:
@@ -126,6 +144,7 @@ class Paired:
         return (
             f"{self.name:<16}{self.missions:>9}{self.a:>7}{self.b:>7}{self.gained:>8}{self.lost:>6}"
             f"{f'{self.wrong_a} / {self.wrong_b}':>12}{change:>9}{self.p_value:>8.2f}"
+            f"{self.time_p_value:>8.2f}"
         )
 
     def as_row(self) -> dict[str, Any]:
@@ -140,12 +159,14 @@ class Paired:
             "wrong_b": self.wrong_b,
             "time_change_s": self.time_change_s,
             "p_value": self.p_value,
+            "both_succeeded": self.both,
+            "time_p_value": self.time_p_value,
         }
 
 
 HEADER = (
     f"{'class':<16}{'missions':>9}{'A':>7}{'B':>7}{'gained':>8}{'lost':>6}{'wrong A/B':>12}"
-    f"{'d time':>9}{'p':>8}"
+    f"{'d time':>9}{'p':>8}{'p time':>8}"
 )
 
 
@@ -172,6 +193,17 @@ class Comparison:
             f"sign test p = {p:.3g}: {noise} (p {'>=' if p >= NOISE_P else '<'} {NOISE_P})"
         )
 
+    def time_verdict(self) -> str:
+        t = self.total
+        if t.time_change_s is None:
+            return "no mission succeeded on both sides"
+        p = t.time_p_value
+        noise = "within the noise of these seeds" if p >= NOISE_P else "beyond the noise of these seeds"
+        return (
+            f"median {t.time_change_s:+.1f} s over the {t.both} missions both succeeded in; "
+            f"signed-rank p = {p:.3g}: {noise}"
+        )
+
     def lines(self) -> list[str]:
         (worst_a, rate_a), (worst_b, rate_b) = self.worst("a"), self.worst("b")
         return [
@@ -181,6 +213,7 @@ class Comparison:
             f"worst class: A {worst_a} {rate_a:.1%}, B {worst_b} {rate_b:.1%}; wrong declarations: "
             f"A {self.total.wrong_a}, B {self.total.wrong_b} of {self.total.missions}",
             f"verdict: {self.verdict()}",
+            f"time: {self.time_verdict()}",
         ]
 
 

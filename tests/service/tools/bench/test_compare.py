@@ -1,4 +1,5 @@
-"""``oslim bench compare``: two suite runs paired mission by mission, with an exact sign test."""
+"""``oslim bench compare``: two suite runs paired mission by mission, with an exact sign test on the
+outcomes and a signed-rank test on the times."""
 
 from __future__ import annotations
 
@@ -31,6 +32,32 @@ def test_the_sign_test_is_the_exact_binomial_tail() -> None:
     assert compare.sign_test(3, 3) == pytest.approx(1.0)
 
 
+def test_the_signed_rank_test_is_the_exact_wilcoxon_tail() -> None:
+    assert compare.signed_rank_test([]) == 1.0
+    assert compare.signed_rank_test([0.0, 0.0]) == 1.0  # ties at zero say nothing
+    # eight differences of one sign, distinct sizes: only the all-negative and all-positive of the
+    # 2^8 equally likely sign patterns have a rank sum as extreme
+    assert compare.signed_rank_test([-1.0, -2.0, -3.0, -4.0, -5.0, -6.0, -7.0, -8.0]) == pytest.approx(
+        2 / 256
+    )
+    # ranks 1-4 with signs - - + +: W+ = 7 of 10; of the 16 patterns, 10 have a rank sum of 3 or
+    # less, or 7 or more
+    assert compare.signed_rank_test([-1.0, -2.0, 3.0, 4.0, 0.0]) == pytest.approx(10 / 16)
+
+
+def test_a_time_saving_on_every_mission_is_beyond_the_noise(tmp_path: Path) -> None:
+    a = _write(tmp_path / "a.jsonl", {("steady", s): (True, False, 100.0 + s) for s in range(8)})
+    b = _write(tmp_path / "b.jsonl", {("steady", s): (True, False, 99.0 - s) for s in range(8)})
+    result = compare.compare(compare.load_missions(a), compare.load_missions(b))
+    total = result.total
+    assert (total.gained, total.lost, total.both) == (0, 0, 8)
+    assert total.time_change_s == pytest.approx(-8.0)  # differences -1, -3, ..., -15
+    assert total.time_p_value == pytest.approx(2 / 256)
+    assert "within the noise" in result.verdict()  # the outcomes did not change
+    assert "beyond the noise" in result.time_verdict()
+    assert result.time_verdict().startswith("median -8.0 s over the 8 missions both succeeded in")
+
+
 def test_missions_are_paired_by_class_and_seed(tmp_path: Path) -> None:
     a = _write(tmp_path / "a.jsonl", {
         ("steady", 0): (True, False, 100.0), ("steady", 1): (False, False, 300.0),
@@ -55,6 +82,7 @@ def test_missions_are_paired_by_class_and_seed(tmp_path: Path) -> None:
     )
     assert (patchy.wrong_a, patchy.wrong_b) == (1, 0)
     assert patchy.time_change_s is None  # no mission succeeded on both sides
+    assert (patchy.both, patchy.time_p_value) == (0, 1.0)
     assert (steady.a, steady.b, steady.gained, steady.lost) == (2, 2, 1, 1)
     assert steady.time_change_s == pytest.approx(-10.0)
     total = result.total
@@ -124,3 +152,4 @@ def test_the_suite_writes_its_missions_for_compare(
     text = capsys.readouterr().out
     assert "2 missions paired" in text
     assert "verdict: B - A = +0 of 2 missions" in text
+    assert "time: median +0.0 s" in text or "time: no mission succeeded on both sides" in text
