@@ -359,7 +359,8 @@ def _run_compare(args: argparse.Namespace) -> int:
     print(
         f"A {args.a}, B {args.b}: {result.total.missions} missions paired by class and seed "
         f"(unpaired: {result.only_a} in A, {result.only_b} in B); d time: median of B's time less A's "
-        "where both succeeded; p: exact sign test over the missions that changed"
+        "where both succeeded; p: exact sign test over the missions that changed; p time: signed-rank "
+        "test of the time changes"
     )
     for line in result.lines():
         print(line)

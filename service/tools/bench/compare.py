@@ -111,20 +111,30 @@ class Paired:
     lost: int
     wrong_a: int
     wrong_b: int
-    time_change_s: float | None
-    """Median of B's time less A's, over the missions both succeeded in."""
-    time_p_value: float = 1.0
-    """Signed-rank p of those time differences (``signed_rank_test``)."""
-    both: int = 0
-    """Missions both succeeded in."""
+    time_changes: tuple[float, ...]
+    """B's time less A's, over the missions both succeeded in."""
 
     @property
     def p_value(self) -> float:
         return sign_test(self.gained, self.lost)
 
+    @property
+    def both(self) -> int:
+        """Missions both succeeded in."""
+        return len(self.time_changes)
+
+    @property
+    def time_change_s(self) -> float | None:
+        """Median of ``time_changes``; None when no mission succeeded on both sides."""
+        return float(np.median(self.time_changes)) if self.time_changes else None
+
+    @property
+    def time_p_value(self) -> float:
+        return signed_rank_test(self.time_changes)
+
     @classmethod
     def of(cls, name: str, pairs: Sequence[tuple[dict[str, Any], dict[str, Any]]]) -> Paired:
-        both = [b["time_s"] - a["time_s"] for a, b in pairs if a["correct"] and b["correct"]]
+        both = tuple(b["time_s"] - a["time_s"] for a, b in pairs if a["correct"] and b["correct"])
         return cls(
             name=name,
             missions=len(pairs),
@@ -134,9 +144,7 @@ class Paired:
             lost=sum(bool(a["correct"]) and not b["correct"] for a, b in pairs),
             wrong_a=sum(bool(a["wrong"]) for a, _ in pairs),
             wrong_b=sum(bool(b["wrong"]) for _, b in pairs),
-            time_change_s=float(np.median(both)) if both else None,
-            time_p_value=signed_rank_test(both),
-            both=len(both),
+            time_changes=both,
         )
 
     def line(self) -> str:
@@ -170,6 +178,10 @@ HEADER = (
 )
 
 
+def _noise(p: float) -> str:
+    return "within the noise of these seeds" if p >= NOISE_P else "beyond the noise of these seeds"
+
+
 @dataclass(frozen=True)
 class Comparison:
     classes: tuple[Paired, ...]
@@ -187,21 +199,18 @@ class Comparison:
     def verdict(self) -> str:
         t = self.total
         p = t.p_value
-        noise = "within the noise of these seeds" if p >= NOISE_P else "beyond the noise of these seeds"
         return (
             f"B - A = {t.b - t.a:+d} of {t.missions} missions ({t.gained} gained, {t.lost} lost); "
-            f"sign test p = {p:.3g}: {noise} (p {'>=' if p >= NOISE_P else '<'} {NOISE_P})"
+            f"sign test p = {p:.3g}: {_noise(p)} (p {'>=' if p >= NOISE_P else '<'} {NOISE_P})"
         )
 
     def time_verdict(self) -> str:
         t = self.total
         if t.time_change_s is None:
             return "no mission succeeded on both sides"
-        p = t.time_p_value
-        noise = "within the noise of these seeds" if p >= NOISE_P else "beyond the noise of these seeds"
         return (
             f"median {t.time_change_s:+.1f} s over the {t.both} missions both succeeded in; "
-            f"signed-rank p = {p:.3g}: {noise}"
+            f"signed-rank p = {t.time_p_value:.3g}: {_noise(t.time_p_value)}"
         )
 
     def lines(self) -> list[str]:

@@ -148,8 +148,15 @@ def test_the_suite_writes_its_missions_for_compare(
     assert steady["class"] == "steady"
     assert total["class"] == "all"
     assert (total["missions"], total["gained"], total["lost"], total["p_value"]) == (2, 0, 0, 1.0)
+    succeeded = sum(r["correct"] for r in rows)
+    assert (total["both_succeeded"], total["time_p_value"]) == (succeeded, 1.0)
     assert main(["bench", "compare", str(missions), str(missions)]) == 0
     text = capsys.readouterr().out
     assert "2 missions paired" in text
     assert "verdict: B - A = +0 of 2 missions" in text
-    assert "time: median +0.0 s" in text or "time: no mission succeeded on both sides" in text
+    if succeeded:
+        assert (
+            f"time: median +0.0 s over the {succeeded} missions both succeeded in; signed-rank p = 1:" in text
+        )
+    else:
+        assert "time: no mission succeeded on both sides" in text
