@@ -112,9 +112,17 @@ def axis_cell_mass(edges: FloatArray, centre: FloatArray, spread: FloatArray) ->
     return np.clip(mass, 0.0, 1.0)
 
 
+G_TAIL_Z = 9.0
+"""Beyond |z| = this, G(z) = max(z, 0) to within 1e-20 (Phi's tail and phi there are below 1e-18)."""
+
+
 def _normal_cdf_integral(z: FloatArray) -> FloatArray:
-    """G(z) = z Phi(z) + phi(z), whose derivative is Phi(z)."""
-    out: FloatArray = z * ndtr(z) + np.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi)
+    """G(z) = z Phi(z) + phi(z), whose derivative is Phi(z); evaluated only where it differs from
+    its asymptote max(z, 0) (about half of a tick's edges)."""
+    out: FloatArray = np.maximum(z, 0.0)
+    near = np.abs(z) < G_TAIL_Z
+    zn = z[near]
+    out[near] = zn * ndtr(zn) + np.exp(-0.5 * zn * zn) / math.sqrt(2.0 * math.pi)
     return out
 
 

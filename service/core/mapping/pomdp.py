@@ -11,8 +11,8 @@ p_ij is separable (``filament``), but the product over release times is not. ``l
 therefore splits log gamma = sum_l log1p(-mu px_l py_l) by release time: a lag whose largest term
 x = mu px_l py_l is small uses the series log(1 - x) = -sum_k x^k / k, whose every term is a rank-one
 outer product, so all such lags together cost one matrix product; a lag with a large x (short lags,
-where the filament is concentrated) is evaluated directly, but only over the box where px_l and
-py_l are non-negligible.
+where the filament is concentrated) is evaluated directly, but only over the box where
+mu px_l py_l can exceed the series' tolerance.
 """
 
 from __future__ import annotations
@@ -29,12 +29,15 @@ SERIES_TOLERANCE = 1e-12
 """Bound on the truncation error of log gamma per release time (so about window x this in all)."""
 MAX_SERIES_TERMS = 12
 """A lag that needs more terms than this is evaluated directly over its support box."""
-SUPPORT_FLOOR = 1e-18
-"""Per-axis filament probabilities below this are left out of a direct lag's box."""
 DIRECT_COST_RATIO = 100.0
 """Cost of one directly evaluated log1p element relative to one multiply-add of a matrix product."""
 WHOLE_DIRECT_SIZE = 50_000
 """Up to this many (release time, cell) pairs, eq. 2 is evaluated directly in one vectorised pass."""
+BOX_GROUP_WASTE = 2.0
+"""Consecutive direct lags are evaluated together over the union of their boxes while that union,
+once per lag, holds at most this many times the cells of their own boxes."""
+BOX_GROUP_MOST = 16
+"""Most direct lags evaluated together."""
 
 
 def series_terms(peak: FloatArray, tolerance: float = SERIES_TOLERANCE) -> npt.NDArray[np.intp]:
@@ -51,9 +54,9 @@ def series_terms(peak: FloatArray, tolerance: float = SERIES_TOLERANCE) -> npt.N
     return terms
 
 
-def _support(values: FloatArray) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
-    """First and one-past-last index of each row's entries above SUPPORT_FLOOR (unimodal rows)."""
-    above = values > SUPPORT_FLOOR
+def _support(values: FloatArray, floor: FloatArray) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """First and one-past-last index of each row's entries above that row's ``floor`` (unimodal rows)."""
+    above = values > floor[:, None]
     width = values.shape[1]
     first = np.argmax(above, axis=1)
     last = width - np.argmax(above[:, ::-1], axis=1)
@@ -67,10 +70,14 @@ def log_non_detection(px: FloatArray, py: FloatArray, mu: float) -> FloatArray:
         with np.errstate(divide="ignore"):
             whole: FloatArray = np.log1p(-mu * py[:, :, None] * px[:, None, :]).sum(axis=0, out=out)
         return whole
-    peak = mu * px.max(axis=1, initial=0.0) * py.max(axis=1, initial=0.0)
+    x_peak, y_peak = px.max(axis=1, initial=0.0), py.max(axis=1, initial=0.0)
+    peak = mu * x_peak * y_peak
     terms = series_terms(peak)
-    c0, c1 = _support(px)
-    r0, r1 = _support(py)
+    # a direct lag's box: the cells where mu px py may exceed the series' tolerance; a term left
+    # out of it is below that tolerance, as the series' truncation is
+    with np.errstate(divide="ignore"):
+        c0, c1 = _support(px, SERIES_TOLERANCE / (mu * y_peak))
+        r0, r1 = _support(py, SERIES_TOLERANCE / (mu * x_peak))
     box = (c1 - c0) * (r1 - r0)
     direct = (peak > 0.0) & ((terms == 0) | (box * DIRECT_COST_RATIO < terms * out.size))
     series = (peak > 0.0) & ~direct
@@ -87,12 +94,51 @@ def log_non_detection(px: FloatArray, py: FloatArray, mu: float) -> FloatArray:
     if ys:
         out -= np.concatenate(ys).T @ np.concatenate(xs)
 
-    # eq. 2 directly over each concentrated lag's support box; mu px py = 1 gives log 0 = -inf
+    # eq. 2 directly over the concentrated lags' support boxes; mu px py = 1 gives log 0 = -inf
     with np.errstate(divide="ignore"):
-        for lag in np.flatnonzero(direct):
-            rows, cols = slice(r0[lag], r1[lag]), slice(c0[lag], c1[lag])
-            out[rows, cols] += np.log1p(-mu * (py[lag, rows, None] * px[lag, None, cols]))
+        for lags, rows, cols in _box_groups(np.flatnonzero(direct), r0, r1, c0, c1):
+            terms_box = np.log1p(-mu * (py[lags, rows][:, :, None] * px[lags, cols][:, None, :]))
+            out[rows, cols] += terms_box.sum(axis=0)
     return out
+
+
+def _box_groups(
+    lags: npt.NDArray[np.intp],
+    r0: npt.NDArray[np.intp],
+    r1: npt.NDArray[np.intp],
+    c0: npt.NDArray[np.intp],
+    c1: npt.NDArray[np.intp],
+) -> list[tuple[list[int], slice, slice]]:
+    """``lags`` in runs of consecutive ones whose boxes (rows r0:r1, columns c0:c1) overlap enough
+    to be evaluated over their union at once (``BOX_GROUP_WASTE``, ``BOX_GROUP_MOST``): a
+    filament's box moves little from one release time to the next, and one array operation per
+    run costs less than one per lag. Cells of the union outside a lag's own box add terms below
+    the series' tolerance."""
+    groups: list[tuple[list[int], slice, slice]] = []
+    run: list[int] = []
+    top = bottom = left = right = own = 0
+    boxes = zip(
+        lags.tolist(), r0[lags].tolist(), r1[lags].tolist(), c0[lags].tolist(), c1[lags].tolist(), strict=True
+    )
+    for lag, a, b, c, d in boxes:
+        area = (b - a) * (d - c)
+        if run:
+            union = (max(bottom, b) - min(top, a)) * (max(right, d) - min(left, c))
+            if len(run) < BOX_GROUP_MOST and union * (len(run) + 1) <= BOX_GROUP_WASTE * (own + area):
+                run.append(lag)
+                top, bottom, left, right, own = (
+                    min(top, a),
+                    max(bottom, b),
+                    min(left, c),
+                    max(right, d),
+                    own + area,
+                )
+                continue
+            groups.append((run, slice(top, bottom), slice(left, right)))
+        run, top, bottom, left, right, own = [lag], a, b, c, d, area
+    if run:
+        groups.append((run, slice(top, bottom), slice(left, right)))
+    return groups
 
 
 class PomdpMapper(ObservationModelMapper):

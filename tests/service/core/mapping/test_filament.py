@@ -7,6 +7,8 @@ from scipy.stats import norm
 
 from service.core.grid import Grid
 from service.core.mapping.filament import (
+    G_TAIL_Z,
+    _normal_cdf_integral,
     filament_factors,
     footprint_mass,
     history_factors,
@@ -172,6 +174,19 @@ def test_footprint_mass_is_the_averaged_gaussian_window() -> None:
         xs = np.linspace(lo, hi, 20001)
         window = norm.cdf((centre + radius - xs) / spread) - norm.cdf((centre - radius - xs) / spread)
         assert mass[0, k] == pytest.approx(np.trapezoid(window, xs) / (hi - lo), abs=1e-8)
+
+
+def test_normal_cdf_integral_takes_its_asymptote_only_where_they_agree() -> None:
+    # G(z) = z Phi(z) + phi(z) everywhere, computed in full: the tail shortcut max(z, 0) beyond
+    # |z| = G_TAIL_Z differs from it by less than 1e-18, and not at all inside
+    z = np.concatenate([np.linspace(-60.0, 60.0, 24001), [-G_TAIL_Z, G_TAIL_Z, 0.0]])
+    full = z * norm.cdf(z) + norm.pdf(z)
+    fast = _normal_cdf_integral(z)
+    assert np.abs(fast - full).max() < 1e-18
+    inside = np.abs(z) < G_TAIL_Z
+    np.testing.assert_allclose(fast[inside], full[inside], rtol=1e-14, atol=0)
+    assert np.all(fast[z >= G_TAIL_Z] == z[z >= G_TAIL_Z])
+    assert np.all(fast[z <= -G_TAIL_Z] == 0.0)
 
 
 def test_a_footprint_uses_the_position_in_the_cell_and_grows_with_age() -> None:

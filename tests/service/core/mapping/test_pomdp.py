@@ -10,7 +10,15 @@ from service.core.mapping import MAPPERS, make_mapper
 from service.core.mapping.bayes import BayesMapper
 from service.core.mapping.filament import filament_factors
 from service.core.mapping.mapper import WIDE_SPREAD, MapperParams
-from service.core.mapping.pomdp import WHOLE_DIRECT_SIZE, PomdpMapper, log_non_detection, series_terms
+from service.core.mapping.pomdp import (
+    BOX_GROUP_MOST,
+    BOX_GROUP_WASTE,
+    WHOLE_DIRECT_SIZE,
+    PomdpMapper,
+    _box_groups,
+    log_non_detection,
+    series_terms,
+)
 from service.core.observation import Observation
 
 SMALL = Grid(0.0, 12.0, 0.0, 8.0, columns=6, rows=4)
@@ -132,6 +140,31 @@ def test_fast_log_gamma_matches_the_naive_sum(case: str) -> None:
         seen = np.isfinite(naive)
         np.testing.assert_array_equal(np.isfinite(fast), seen)
         np.testing.assert_allclose(fast[seen], naive[seen], rtol=1e-9, atol=1e-10)
+
+
+def test_box_groups_cover_each_lag_once_within_the_waste_bound() -> None:
+    rng = np.random.default_rng(3)
+    count = 200
+    # boxes that drift and grow from one lag to the next, as a filament's do, with a few jumps
+    r0 = np.cumsum(rng.integers(0, 2, count)) + rng.integers(0, 3, count)
+    c0 = np.cumsum(rng.integers(0, 3, count))
+    c0[rng.integers(0, count, 5)] += 40
+    r1 = r0 + 3 + np.arange(count) // 10
+    c1 = c0 + 2 + np.arange(count) // 8
+    lags = np.flatnonzero(rng.random(count) < 0.8)
+    groups = _box_groups(lags, r0, r1, c0, c1)
+    flat = [lag for run, _, _ in groups for lag in run]
+    assert flat == lags.tolist()  # every lag once, in order
+    assert 1 < len(groups) < len(lags) // 2
+    for run, rows, cols in groups:
+        assert len(run) <= BOX_GROUP_MOST
+        for lag in run:  # the union holds each member's own box
+            assert rows.start <= r0[lag] < r1[lag] <= rows.stop
+            assert cols.start <= c0[lag] < c1[lag] <= cols.stop
+        own = sum(int((r1[lag] - r0[lag]) * (c1[lag] - c0[lag])) for lag in run)
+        union = (rows.stop - rows.start) * (cols.stop - cols.start)
+        assert union * len(run) <= BOX_GROUP_WASTE * own
+    assert _box_groups(np.array([], dtype=np.intp), r0, r1, c0, c1) == []
 
 
 def test_naive_cases_cover_both_paths() -> None:
