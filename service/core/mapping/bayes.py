@@ -35,9 +35,10 @@ class BayesMapper(ObservationModelMapper):
     ) -> FloatArray:
         """L_i of eq. 5 for a vehicle in flat cell ``cell`` (at ``at`` in it): expected filaments
         there, with their random walk ``spread`` times sigma, shape (n, m)."""
-        px, py = self._filament_factors(cell, at, spread)
-        # eq. 5: pi_i = sum_l P_i(t_l), with P_i(t_l) = py_l(row) px_l(col)
-        out: FloatArray = py.T @ px
+        px, py, weight = self._filament_factors(cell, at, spread)
+        # eq. 5: pi_i = sum_l P_i(t_l), with P_i(t_l) = py_l(row) px_l(col), a merged run of the
+        # prehistory counted as often as it stands for (eq. R1)
+        out: FloatArray = (py * weight[:, None]).T @ px
         return out
 
     def _event_probability(

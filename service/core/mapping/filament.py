@@ -37,7 +37,9 @@ releases since the service started would let a plume reach only as far downflow 
 run since then (20 m after 20 s at 1 m/s), so an early detection would put the source next to the
 vehicle. ``prehistory`` therefore continues the record back in time with the mean step of the
 record (its mean flow), until the oldest release has drifted ``reach_m`` (the area's diagonal:
-every source in the area is in reach) or ``MAX_RELEASES`` release times are counted.
+every source in the area is in reach) or ``MAX_RELEASES`` release times are counted. Its old
+filaments have spread far wider than a tick's drift, so runs of them are merged into one release
+of the run's weight (``merged_steps``, eq. R1).
 
 Release times are one per flow-history entry: the filament released at the start of the newest
 entry has lag dt_newest and drift (dx, dy)_newest, the one before it the cumulative sums of the
@@ -63,35 +65,69 @@ if TYPE_CHECKING:
 
 MAX_RELEASES = 600
 """Most release times a prehistory extends the record to (bounds the work per tick)."""
+PREHISTORY_MERGE = 0.5
+"""The prehistory's releases are merged into runs that drift at most this share of their spread
+(eq. R1)."""
 
 
 def release_offsets(
-    history: Iterable[FlowStep], reach_m: float = 0.0
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Lag t_k - t_l (s) and drift V(t_l, t_k) (m, x and y) of each release time, newest first;
-    with ``reach_m`` > 0 the record is continued with its mean step (the prehistory) until the
-    oldest release has drifted that far."""
+    history: Iterable[FlowStep], reach_m: float = 0.0, sigma: float = 0.0
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Lag t_k - t_l (s), drift V(t_l, t_k) (m, x and y) and weight (how many releases it stands
+    for) of each release time, newest first. With ``reach_m`` > 0 the record is continued with its
+    mean step (the prehistory) until the oldest release has drifted that far; with ``sigma`` > 0
+    (the filaments' random walk, m/sqrt(s)) the prehistory's releases are merged (eq. R1)."""
     steps = list(history)[::-1]
     dt = np.fromiter((s.dt_s for s in steps), dtype=float, count=len(steps))
     dx = np.fromiter((s.dx_m for s in steps), dtype=float, count=len(steps))
     dy = np.fromiter((s.dy_m for s in steps), dtype=float, count=len(steps))
     lag, drift_x, drift_y = np.cumsum(dt), np.cumsum(dx), np.cumsum(dy)
+    weight = np.ones(len(steps))
     if reach_m <= 0.0 or not steps:
-        return lag, drift_x, drift_y
+        return lag, drift_x, drift_y, weight
     step_m = math.hypot(float(dx.mean()), float(dy.mean()))
     reached_m = math.hypot(float(drift_x[-1]), float(drift_y[-1]))
     if step_m <= 0.0 or reached_m >= reach_m:
-        return lag, drift_x, drift_y
+        return lag, drift_x, drift_y, weight
     extra = min(math.ceil((reach_m - reached_m) / step_m), MAX_RELEASES - len(steps))
     if extra <= 0:
-        return lag, drift_x, drift_y
+        return lag, drift_x, drift_y, weight
     # the prehistory: before the record, the record's mean step, again and again
     k = np.arange(1, extra + 1, dtype=float)
+    count = np.ones(extra)
+    if sigma > 0.0:
+        k, count = merged_steps(k, lag[-1], float(dt.mean()), step_m, sigma)
     return (
         np.concatenate([lag, lag[-1] + k * dt.mean()]),
         np.concatenate([drift_x, drift_x[-1] + k * dx.mean()]),
         np.concatenate([drift_y, drift_y[-1] + k * dy.mean()]),
+        np.concatenate([weight, count]),
     )
+
+
+def merged_steps(
+    k: FloatArray, lag_s: float, dt_s: float, step_m: float, sigma: float
+) -> tuple[FloatArray, FloatArray]:
+    """The prehistory's releases ``k`` steps before the record's oldest (at ``lag_s``), merged
+    into runs that drift at most ``PREHISTORY_MERGE`` of their spread sigma sqrt(lag): each run
+    is one release at its mean step, weighted by its length (eq. R1). Returns (mean step, length)
+    per run, oldest last.
+
+    A continuous source releases all the time; one filament per tick is a quadrature of that
+    release over time. Old filaments have spread far more than the flow moves them in a tick, so
+    neighbouring ones are nearly the same filament and a coarser quadrature gives the same
+    chances: with runs at most half a spread long, P(detection) moves by less than 0.5 %
+    (docs/search-benchmark.md, Speed) while a slow flow's 400 prehistoric releases become 90.
+
+        run of step k = floor(sum_{j<=k} step_m / (PREHISTORY_MERGE sigma sqrt(lag_j)))   (eq. R1)
+    """
+    lags = lag_s + k * dt_s
+    run = np.floor(np.cumsum(step_m / (PREHISTORY_MERGE * sigma * np.sqrt(lags)))).astype(np.intp)
+    run -= run[0]
+    length = np.bincount(run).astype(float)
+    taken = length > 0
+    mean = np.bincount(run, weights=k)[taken] / length[taken]
+    return mean, length[taken]
 
 
 def axis_cell_mass(edges: FloatArray, centre: FloatArray, spread: FloatArray) -> FloatArray:
@@ -195,20 +231,22 @@ def history_factors(
     footprint_m: float = 0.0,
     footprint_growth: float = 0.0,
     at: tuple[float, float] | None = None,
-) -> tuple[FloatArray, FloatArray]:
-    """``filament_factors`` for flat cell ``cell`` over every release time in ``history``; with
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``filament_factors`` for flat cell ``cell`` over every release time in ``history``, and
+    each release time's weight (``release_offsets``); with
     ``zero_lag`` also the release of this very tick (lag 0, still at its source: the first row);
-    ``reach_m`` > 0 adds the prehistory;
+    ``reach_m`` > 0 adds the prehistory, its releases merged (eq. R1);
     ``footprint_m`` > 0 the point detector of eq. F1-F2, at ``at`` (the vehicle's position in
     ``cell``; the cell's centre when None)."""
-    lag, drift_x, drift_y = release_offsets(history, reach_m)
+    lag, drift_x, drift_y, weight = release_offsets(history, reach_m, min(sigma_x, sigma_y))
     if zero_lag:
         # a continuous source has odour at its own position now; the papers' releases stop at the
         # previous tick, so a vehicle in the source's cell would need last tick's filament not to
         # have left the cell (it often has, at 1 m/s in a 2.5 m cell) to expect a detection
         lag, drift_x, drift_y = (np.concatenate([[0.0], a]) for a in (lag, drift_x, drift_y))
+        weight = np.concatenate([[1.0], weight])
     x, y = at if at is not None and footprint_m > 0.0 else grid.centre(cell)
-    return filament_factors(
+    px, py = filament_factors(
         grid,
         x,
         y,
@@ -220,3 +258,4 @@ def history_factors(
         footprint_m=footprint_m,
         footprint_growth=footprint_growth,
     )
+    return px, py, weight

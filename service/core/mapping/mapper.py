@@ -298,8 +298,9 @@ class ObservationModelMapper(SourceMapper):
 
     def _filament_factors(
         self, cell: int, at: tuple[float, float] | None = None, spread: float = 1.0
-    ) -> tuple[FloatArray, FloatArray]:
-        """Px (W, m) and Py (W, n): one filament per release time of the window, seen from ``cell``
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Px (W, m), Py (W, n) and each release time's weight (W,): one filament per release time
+        of the window and the prehistory's merged runs, seen from ``cell``
         (from the position ``at`` in it, with a footprint; its centre otherwise), its random walk
         ``spread`` times sigma."""
         p = self.params

@@ -63,12 +63,14 @@ def _support(values: FloatArray, floor: FloatArray) -> tuple[npt.NDArray[np.intp
     return first, np.where(above.any(axis=1), last, first)
 
 
-def log_non_detection(px: FloatArray, py: FloatArray, mu: float) -> FloatArray:
-    """log gamma_ij (eq. 2) from the stacked factors Px (W, m) and Py (W, n), shape (n, m)."""
+def log_non_detection(px: FloatArray, py: FloatArray, mu: float, weight: FloatArray) -> FloatArray:
+    """log gamma_ij (eq. 2) from the stacked factors Px (W, m) and Py (W, n), each release time's
+    term counted ``weight`` (W,) times (a merged run of the prehistory, eq. R1), shape (n, m)."""
     out = np.zeros((py.shape[1], px.shape[1]))
     if px.shape[0] * out.size <= WHOLE_DIRECT_SIZE:
         with np.errstate(divide="ignore"):
-            whole: FloatArray = np.log1p(-mu * py[:, :, None] * px[:, None, :]).sum(axis=0, out=out)
+            terms = np.log1p(-mu * py[:, :, None] * px[:, None, :])
+        whole: FloatArray = np.tensordot(weight, terms, axes=1)
         return whole
     x_peak, y_peak = px.max(axis=1, initial=0.0), py.max(axis=1, initial=0.0)
     peak = mu * x_peak * y_peak
@@ -85,10 +87,11 @@ def log_non_detection(px: FloatArray, py: FloatArray, mu: float) -> FloatArray:
     # eq. 2 by series: sum_l log(1 - mu px_l py_l) = -sum_l sum_k (mu^k / k) py_l^k (x) px_l^k
     ys, xs = [], []
     lag_y, lag_x = py[series], px[series]
+    lag_weight = weight[series, None]
     power_y, power_x = lag_y, lag_x
     for k in range(1, int(terms[series].max(initial=0)) + 1):
         keep = terms[series] >= k
-        ys.append(power_y[keep] * (mu**k / k))
+        ys.append(power_y[keep] * lag_weight[keep] * (mu**k / k))
         xs.append(power_x[keep])
         power_y, power_x = power_y * lag_y, power_x * lag_x
     if ys:
@@ -98,7 +101,7 @@ def log_non_detection(px: FloatArray, py: FloatArray, mu: float) -> FloatArray:
     with np.errstate(divide="ignore"):
         for lags, rows, cols in _box_groups(np.flatnonzero(direct), r0, r1, c0, c1):
             terms_box = np.log1p(-mu * (py[lags, rows][:, :, None] * px[lags, cols][:, None, :]))
-            out[rows, cols] += terms_box.sum(axis=0)
+            out[rows, cols] += np.tensordot(weight[lags], terms_box, axes=1)
     return out
 
 
@@ -148,8 +151,8 @@ class PomdpMapper(ObservationModelMapper):
         """log gamma_ij (eq. 2) for a vehicle in flat cell ``cell`` (at ``at`` in it), over the
         window, with the filaments' random walk ``spread`` times sigma, shape (n, m)."""
         p = self.params
-        px, py = self._filament_factors(cell, at, spread)
-        return log_non_detection(px, py, p.mu)
+        px, py, weight = self._filament_factors(cell, at, spread)
+        return log_non_detection(px, py, p.mu, weight)
 
     def _floored_gamma(self, cell: int, at: tuple[float, float] | None, spread: float) -> FloatArray:
         """gamma' = r + (1 - r) gamma, with r the miss floor."""

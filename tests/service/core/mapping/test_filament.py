@@ -119,18 +119,20 @@ def test_release_offsets_accumulate_newest_first() -> None:
         return FlowStep(transition(SMALL, dx / dt, dy / dt, dt), dx, dy, dt)
 
     history = [step(1.0, 0.5, 1.0), step(2.0, -1.0, 0.5), step(0.25, 0.0, 2.0)]  # oldest first
-    lag, sx, sy = release_offsets(history)
+    lag, sx, sy, weight = release_offsets(history)
+    np.testing.assert_array_equal(weight, [1.0, 1.0, 1.0])
     np.testing.assert_allclose(lag, [2.0, 2.5, 3.5])
     np.testing.assert_allclose(sx, [0.25, 2.25, 3.25])
     np.testing.assert_allclose(sy, [0.0, -1.0, -0.5])
-    px, py = history_factors(SMALL, SMALL.cell_of(7.0, 3.0), history, 0.5, 0.5)
+    px, py, _ = history_factors(SMALL, SMALL.cell_of(7.0, 3.0), history, 0.5, 0.5)
     expect_x = reference_factor(np.arange(6) * 2.0, 7.0, 2.25, 0.5 * math.sqrt(2.5))
     np.testing.assert_allclose(px[1], expect_x, atol=1e-14)
     assert py.shape == (3, 4)
 
 
 def test_empty_history_has_no_release_times() -> None:
-    px, py = history_factors(SMALL, 0, [], 1.0, 1.0)
+    px, py, weight = history_factors(SMALL, 0, [], 1.0, 1.0)
+    assert weight.shape == (0,)
     assert px.shape == (0, 5)
     assert py.shape == (0, 4)
 
@@ -142,7 +144,8 @@ def _flow_steps(n: int, dx: float) -> list[FlowStep]:
 
 
 def test_the_prehistory_continues_the_record_with_its_mean_step() -> None:
-    lag, dx, dy = release_offsets(_flow_steps(3, 1.0), reach_m=10.0)
+    lag, dx, dy, weight = release_offsets(_flow_steps(3, 1.0), reach_m=10.0)
+    np.testing.assert_array_equal(weight, np.ones(10))
     np.testing.assert_allclose(lag, np.arange(1.0, 11.0))
     np.testing.assert_allclose(dx, np.arange(1.0, 11.0))
     np.testing.assert_allclose(dy, 0.0)
@@ -151,8 +154,23 @@ def test_the_prehistory_continues_the_record_with_its_mean_step() -> None:
 
 
 def test_without_a_flow_there_is_no_prehistory() -> None:
-    lag, _, _ = release_offsets(_flow_steps(3, 0.0), reach_m=10.0)
+    lag, _, _, _ = release_offsets(_flow_steps(3, 0.0), reach_m=10.0, sigma=0.2)
     assert len(lag) == 3
+
+
+def test_the_prehistory_is_merged_in_runs_of_half_a_spread() -> None:
+    # eq. R1 worked by hand: 0.1 m a tick, sigma 0.2, three ticks of record, ten prehistoric steps.
+    # Step k (lag 3 + k) drifts 0.1 / (0.5 x 0.2 sqrt(3 + k)) = 1 / sqrt(3 + k) of a run: running
+    # sums 0.50 0.95 1.36 1.73 2.09 2.42 2.74 3.04 3.33 3.60, so runs {1, 2} {3, 4} {5, 6, 7} {8, 9, 10}
+    lag, dx, dy, weight = release_offsets(_flow_steps(3, 0.1), reach_m=1.25, sigma=0.2)
+    np.testing.assert_allclose(lag, [1.0, 2.0, 3.0, 4.5, 6.5, 9.0, 12.0])
+    np.testing.assert_allclose(dx, 0.1 * lag)
+    np.testing.assert_allclose(dy, 0.0)
+    np.testing.assert_array_equal(weight, [1.0, 1.0, 1.0, 2.0, 2.0, 3.0, 3.0])
+    # the record itself is never merged, and weights count every prehistoric release once
+    unmerged = release_offsets(_flow_steps(3, 0.1), reach_m=1.25)
+    assert len(unmerged[0]) == 13
+    assert weight.sum() == unmerged[3].sum()
 
 
 def test_footprint_mass_without_spread_is_the_overlap_with_the_cell() -> None:
@@ -197,16 +215,17 @@ def test_a_footprint_uses_the_position_in_the_cell_and_grows_with_age() -> None:
     centred = history_factors(SMALL, cell, history, 0.2, 0.2, zero_lag=True)
     for a, b in zip(plain, centred, strict=True):
         np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(plain[2], np.ones(4))  # this tick's release and the record's three
     # with one, the filament released this tick is smelt only from within r0 of the source: from
     # (4.1, 4.1) a source in the vehicle's own cell [4, 6] x [4, 6] is within 0.5 m in 0.3 of x
-    px, py = history_factors(
+    px, py, _ = history_factors(
         SMALL, cell, history, 0.2, 0.2, zero_lag=True, footprint_m=0.5, footprint_growth=0.1, at=(4.1, 4.1)
     )
     col, row = 2, 2
     assert px[0, col] == pytest.approx(0.6 / 2.0)
     assert py[0, row] == pytest.approx(0.6 / 2.0)
     # older filaments are smelt from farther: the radius sqrt(0.25 + 0.1 tau) grows with the lag
-    lag, _, drift_y = release_offsets(history)
+    lag, _, drift_y, _ = release_offsets(history)
     radius = np.sqrt(0.25 + 0.1 * np.concatenate([[0.0], lag]))
     assert np.all(np.diff(radius) > 0)
     spread = 0.2 * np.sqrt(np.concatenate([[0.0], lag]))

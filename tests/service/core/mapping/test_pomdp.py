@@ -8,8 +8,8 @@ import pytest
 from service.core.grid import Grid
 from service.core.mapping import MAPPERS, make_mapper
 from service.core.mapping.bayes import BayesMapper
-from service.core.mapping.filament import filament_factors
-from service.core.mapping.mapper import WIDE_SPREAD, MapperParams
+from service.core.mapping.filament import filament_factors, release_offsets
+from service.core.mapping.mapper import WIDE_SPREAD, FlowStep, MapperParams
 from service.core.mapping.pomdp import (
     BOX_GROUP_MOST,
     BOX_GROUP_WASTE,
@@ -19,6 +19,7 @@ from service.core.mapping.pomdp import (
     log_non_detection,
     series_terms,
 )
+from service.core.mapping.transport import transition
 from service.core.observation import Observation
 
 SMALL = Grid(0.0, 12.0, 0.0, 8.0, columns=6, rows=4)
@@ -135,11 +136,61 @@ def test_fast_log_gamma_matches_the_naive_sum(case: str) -> None:
         px, py = random_factors(rng, grid, window, dt, sigma)
         with np.errstate(divide="ignore"):
             naive = np.log1p(-mu * py[:, :, None] * px[:, None, :]).sum(axis=0)
-        fast = log_non_detection(px, py, mu)
+        fast = log_non_detection(px, py, mu, np.ones(window))
         np.testing.assert_allclose(np.exp(fast), np.exp(naive), rtol=0, atol=1e-9)
         seen = np.isfinite(naive)
         np.testing.assert_array_equal(np.isfinite(fast), seen)
         np.testing.assert_allclose(fast[seen], naive[seen], rtol=1e-9, atol=1e-10)
+
+
+def test_weighted_release_times_count_as_often_as_their_weight() -> None:
+    # a release of weight w adds w log(1 - mu px py), on both the series and the direct path
+    grid, window, dt, sigma, mu = CASES["1 m cells, mixed lags"]
+    rng = np.random.default_rng(11)
+    px, py = random_factors(rng, grid, window, dt, sigma)
+    weight = rng.integers(1, 5, window).astype(float)
+    with np.errstate(divide="ignore"):
+        naive = np.tensordot(weight, np.log1p(-mu * py[:, :, None] * px[:, None, :]), axes=1)
+    fast = log_non_detection(px, py, mu, weight)
+    np.testing.assert_allclose(fast, naive, rtol=1e-9, atol=1e-9)
+    # weight 2 is the same release listed twice
+    twice = log_non_detection(np.repeat(px, 2, axis=0), np.repeat(py, 2, axis=0), mu, np.ones(2 * window))
+    np.testing.assert_allclose(
+        log_non_detection(px, py, mu, np.full(window, 2.0)), twice, rtol=1e-9, atol=1e-9
+    )
+
+
+@pytest.mark.parametrize("speed", [0.3, 1.0])
+def test_the_merged_prehistory_predicts_what_every_release_does(speed: float) -> None:
+    # eq. R1 against one release per prehistoric tick: P(detection) within 1 % wherever it is above
+    # 1e-3, for the narrow plume and the wide one, in a slow flow (most merged) and a 1 m/s one
+    grid = Grid(0.0, 100.0, -50.0, 50.0, columns=80, rows=100)
+    rng = np.random.default_rng(2)
+    angle = 0.3 + np.cumsum(rng.normal(0.0, 0.05, 50))
+    history = [
+        FlowStep(
+            transition(grid, speed * math.cos(a), speed * math.sin(a), 1.0, 0.2, 0.2),
+            speed * math.cos(a),
+            speed * math.sin(a),
+            1.0,
+        )
+        for a in angle
+    ]
+    reach = math.hypot(100.0, 100.0)
+    for sigma in (0.2, 0.2 * WIDE_SPREAD):
+        merged = release_offsets(history, reach, sigma)
+        every = release_offsets(history, reach)
+        assert merged[3].sum() == len(every[0])
+        if speed < 0.5:
+            assert len(merged[0]) < len(every[0]) / 2
+        chances = []
+        for lag, dx, dy, weight in (merged, every):
+            px, py = filament_factors(
+                grid, 80.0, 5.0, lag, dx, dy, sigma, sigma, footprint_m=0.8, footprint_growth=0.1
+            )
+            chances.append(-np.expm1(log_non_detection(px, py, 0.9, weight)))
+        seen = chances[1] > 1e-3
+        np.testing.assert_allclose(chances[0][seen], chances[1][seen], rtol=0.01)
 
 
 def test_box_groups_cover_each_lag_once_within_the_waste_bound() -> None:
