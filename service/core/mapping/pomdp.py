@@ -66,12 +66,12 @@ def _support(values: FloatArray, floor: FloatArray) -> tuple[npt.NDArray[np.intp
 def log_non_detection(px: FloatArray, py: FloatArray, mu: float, weight: FloatArray) -> FloatArray:
     """log gamma_ij (eq. 2) from the stacked factors Px (W, m) and Py (W, n), each release time's
     term counted ``weight`` (W,) times (a merged run of the prehistory, eq. R1), shape (n, m)."""
-    out = np.zeros((py.shape[1], px.shape[1]))
-    if px.shape[0] * out.size <= WHOLE_DIRECT_SIZE:
+    if px.shape[0] * py.shape[1] * px.shape[1] <= WHOLE_DIRECT_SIZE:
         with np.errstate(divide="ignore"):
             terms = np.log1p(-mu * py[:, :, None] * px[:, None, :])
         whole: FloatArray = np.tensordot(weight, terms, axes=1)
         return whole
+    out = np.zeros((py.shape[1], px.shape[1]))
     x_peak, y_peak = px.max(axis=1, initial=0.0), py.max(axis=1, initial=0.0)
     peak = mu * x_peak * y_peak
     terms = series_terms(peak)
