@@ -69,8 +69,8 @@ def log_non_detection(px: FloatArray, py: FloatArray, mu: float, weight: FloatAr
     if px.shape[0] * py.shape[1] * px.shape[1] <= WHOLE_DIRECT_SIZE:
         with np.errstate(divide="ignore"):
             terms = np.log1p(-mu * py[:, :, None] * px[:, None, :])
-        whole: FloatArray = np.tensordot(weight, terms, axes=1)
-        return whole
+        whole: FloatArray = weight @ terms.reshape(weight.size, py.shape[1] * px.shape[1])
+        return whole.reshape(py.shape[1], px.shape[1])
     out = np.zeros((py.shape[1], px.shape[1]))
     x_peak, y_peak = px.max(axis=1, initial=0.0), py.max(axis=1, initial=0.0)
     peak = mu * x_peak * y_peak
@@ -101,7 +101,7 @@ def log_non_detection(px: FloatArray, py: FloatArray, mu: float, weight: FloatAr
     with np.errstate(divide="ignore"):
         for lags, rows, cols in _box_groups(np.flatnonzero(direct), r0, r1, c0, c1):
             terms_box = np.log1p(-mu * (py[lags, rows][:, :, None] * px[lags, cols][:, None, :]))
-            out[rows, cols] += np.tensordot(weight[lags], terms_box, axes=1)
+            out[rows, cols] += (weight[lags] @ terms_box.reshape(len(lags), -1)).reshape(terms_box.shape[1:])
     return out
 
 
@@ -126,16 +126,13 @@ def _box_groups(
     for lag, a, b, c, d in boxes:
         area = (b - a) * (d - c)
         if run:
-            union = (max(bottom, b) - min(top, a)) * (max(right, d) - min(left, c))
-            if len(run) < BOX_GROUP_MOST and union * (len(run) + 1) <= BOX_GROUP_WASTE * (own + area):
+            # the union's bounds by comparison, not min() and max(): this loop runs per direct lag
+            up, down = (top if top < a else a), (bottom if bottom > b else b)
+            lo, hi = (left if left < c else c), (right if right > d else d)
+            n = len(run)
+            if n < BOX_GROUP_MOST and (down - up) * (hi - lo) * (n + 1) <= BOX_GROUP_WASTE * (own + area):
                 run.append(lag)
-                top, bottom, left, right, own = (
-                    min(top, a),
-                    max(bottom, b),
-                    min(left, c),
-                    max(right, d),
-                    own + area,
-                )
+                top, bottom, left, right, own = up, down, lo, hi, own + area
                 continue
             groups.append((run, slice(top, bottom), slice(left, right)))
         run, top, bottom, left, right, own = [lag], a, b, c, d, area
