@@ -151,15 +151,23 @@ class MeanderingFlow(_Clocked):
         x = np.asarray(x_m, dtype=float)
         y = np.asarray(y_m, dtype=float)
         # stream function psi = sum_k (a_k/|kappa_k|) sin(kappa_k . p + phi_k): u = d psi/dy, v = -d psi/dx
-        # (in place: the plume asks this for every puff at every step)
-        weight = np.multiply.outer(x, self._kappa[:, 0])
-        weight += np.multiply.outer(y, self._kappa[:, 1])
-        weight += self._phase
-        np.cos(weight, out=weight)
-        weight *= self._amplitude
-        u = self._mean[0] + self._uniform[0] + weight @ self._normal[:, 0]
-        v = self._mean[1] + self._uniform[1] + weight @ self._normal[:, 1]
+        # (the plume asks this for every puff at every step)
+        phase = np.multiply.outer(x, self._kappa[:, 0])
+        phase += np.multiply.outer(y, self._kappa[:, 1])
+        phase += self._phase
+        # the cosine in single precision: NumPy's is vectorised there and about 20 times faster
+        # than its double one, which was a fifth of a suite mission's time; its error, below 3e-6 of
+        # each mode's amplitude, is far below what the plume or a sensor resolves
+        uv = np.cos(phase, dtype=np.float32) @ self._mode_velocity
+        u = self._mean[0] + self._uniform[0] + uv[..., 0]
+        v = self._mean[1] + self._uniform[1] + uv[..., 1]
         return np.asarray(u, dtype=float), np.asarray(v, dtype=float)
+
+    @property
+    def _mode_velocity(self) -> FloatArray:
+        """(modes, 2): each mode's velocity at unit cosine, its amplitude along its normal."""
+        out: FloatArray = self._amplitude[:, None] * self._normal
+        return out
 
 
 class TurbulentFlow(_Clocked):

@@ -37,10 +37,14 @@ def test_meandering_flow_is_divergence_free_and_smooth() -> None:
     flow = MeanderingFlow((1.0, 0.0), 0.5, 20.0, 60.0, np.random.default_rng(3))
     rng = np.random.default_rng(4)
     x, y = rng.uniform(0, 100, 200), rng.uniform(-50, 50, 200)
-    h = 1e-3
+    # each mode moves the fluid across its own wave vector: the field is divergence free exactly
+    assert np.max(np.abs(np.sum(flow._normal * flow._kappa, axis=1))) < 1e-12
+    # and as evaluated (its cosine is single precision): the divergence is below a thousandth of
+    # the gradients (h = 5 cm: the finite difference's truncation and rounding both small)
+    h = 0.05
     du_dx = (flow.velocity(x + h, y)[0] - flow.velocity(x - h, y)[0]) / (2 * h)
     dv_dy = (flow.velocity(x, y + h)[1] - flow.velocity(x, y - h)[1]) / (2 * h)
-    assert np.max(np.abs(du_dx + dv_dy)) < 1e-8
+    assert np.max(np.abs(du_dx + dv_dy)) < 1e-3 * np.max(np.abs(du_dx))
     # smooth: points 1 m apart differ by far less than the perturbation
     u1, v1 = flow.velocity(x, y)
     u2, v2 = flow.velocity(x + 1.0, y)
