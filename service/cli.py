@@ -342,7 +342,11 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
         "--config", default=None, metavar="FILE", help="service configuration (default config/default.toml)"
     )
     _add_overrides(
-        w, "KEY=VALUE", "override a service key for every class (e.g. mapping.method=bayes)", dest="overrides"
+        w,
+        "KEY=VALUE",
+        "override a service key for every class (e.g. mapping.method=bayes), or a world range of every "
+        "class (a stress test, e.g. 'world.flow_sensor.bias_deg=[-15, 15]')",
+        dest="overrides",
     )
     w.add_argument("--jobs", type=int, default=None, help="worker processes (default: the cores)")
     w.add_argument("--scheduler", default=None, metavar="ADDRESS",

@@ -33,6 +33,7 @@ import math
 import tomllib
 import zlib
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -40,7 +41,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
 
-from service.core.config import Config, load_config
+from service.core.config import Config, apply_override, load_config, parse_override
 from service.core.errors import ConfigError
 from service.core.grid import Grid, Rectangle
 from sim_bridge.autopilot import AUTOPILOTS, VehicleKind
@@ -191,8 +192,10 @@ def available_classes(directory: Path = SUITE_DIR) -> list[Path]:
     return files
 
 
-def load_class(path: str | Path) -> WorldClass:
-    """Read and validate a class file; an error names the file and the key."""
+def load_class(path: str | Path, overrides: Sequence[str] = ()) -> WorldClass:
+    """Read and validate a class file; an error names the file and the key. ``overrides``
+    (``world.KEY=VALUE``, as ``--set`` gives them) replace the class's world ranges, e.g.
+    ``world.flow_sensor.bias_deg=[-15, 15]``: the same worlds made harder in one respect."""
     path = Path(path)
     origin = str(path)
     try:
@@ -206,6 +209,12 @@ def load_class(path: str | Path) -> WorldClass:
         raise ConfigError(
             f"{origin}: {extra[0]}: a world class sets only [suite], [area] and [world] (no service settings)"
         )
+    world = dict(data.get("world", {}))
+    for text in overrides:
+        key, value = parse_override(text)
+        if key[0] != "world":
+            raise ConfigError(f"--set {text}: a class's worlds take world.KEY=VALUE only")
+        apply_override(world, key[1:], value, text)
     area = data.get("area", {})
     unknown = sorted(set(area) - AREA_KEYS)
     if unknown:
@@ -213,7 +222,7 @@ def load_class(path: str | Path) -> WorldClass:
     try:
         return WorldClass.model_validate(
             {"name": path.stem, "origin": origin, "suite": data.get("suite"), "area": area,
-             "world": data.get("world", {})}
+             "world": world}
         )  # fmt: skip
     except ValidationError as exc:
         lines = []

@@ -58,6 +58,16 @@ def test_a_bad_range_names_its_key(tmp_path: Path) -> None:
         load_class(bad)
 
 
+def test_a_class_takes_world_overrides_only() -> None:
+    stressed = load_class(CLASSES["steady"], ["world.flow_sensor.bias_deg=[-15.0, 15.0]"])
+    assert stressed.world.flow_sensor.bias_deg == (-15.0, 15.0)
+    assert stressed.world.flow == load_class(CLASSES["steady"]).world.flow
+    with pytest.raises(
+        ConfigError, match=r"mapping\.method=bayes: a class's worlds take world\.KEY=VALUE only"
+    ):
+        load_class(CLASSES["steady"], ["mapping.method=bayes"])
+
+
 def _signature(world_class: WorldClass, seed: int) -> tuple[object, ...]:
     drawn = draw_scenario(world_class, seed)
     world = build_world(drawn.scenario, seed)

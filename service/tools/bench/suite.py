@@ -4,7 +4,8 @@ Each class draws its worlds from the seed (``sim_bridge.generator``); every miss
 in-process closed loop as ``oslim bench search`` (``search.run_mission``), with the class's time
 limit scaled to the drawn area and vehicle speed. The service configuration is the one a user
 deploys (``config/default.toml`` unless another file is given) with the class's area; ``--set``
-overrides apply to every class. What counts is the worst class and the wrong declarations.
+overrides apply to every class (``world.KEY=VALUE`` ones to its world ranges: a stress test). What
+counts is the worst class and the wrong declarations.
 
 Missions run in a local process pool, or on a Dask cluster (``scheduler``: its address); both
 give the same results for the same seeds, because a mission depends only on its spec.
@@ -67,21 +68,28 @@ class SuiteMission:
     result; 1 is the suite."""
 
 
+def world_overrides(overrides: Sequence[str]) -> tuple[str, ...]:
+    """The ``--set`` overrides under ``world.``: they change every class's world ranges (a stress
+    test: ``world.flow_sensor.bias_deg=[-15, 15]``); the others are the service's."""
+    return tuple(text for text in overrides if text.strip().startswith("world."))
+
+
 @lru_cache(maxsize=64)
-def _world_class(path: str) -> WorldClass:
-    return load_class(path)
+def _world_class(path: str, overrides: tuple[str, ...] = ()) -> WorldClass:
+    return load_class(path, world_overrides(overrides))
 
 
 @lru_cache(maxsize=8)
 def service_config(path: str | None, overrides: tuple[str, ...]) -> Config:
     """The service configuration every class runs with (read once per process)."""
-    return load_config(path, overrides)
+    world = world_overrides(overrides)
+    return load_config(path, [text for text in overrides if text not in world])
 
 
 def drawn_world(spec: SuiteMission) -> DrawnWorld:
     """One suite mission's world and time limit (its class and configuration read once per process)."""
     config = service_config(spec.config_path, spec.overrides)
-    drawn = draw_scenario(_world_class(spec.class_path), spec.seed, config)
+    drawn = draw_scenario(_world_class(spec.class_path, spec.overrides), spec.seed, config)
     if spec.arrival_radius_m <= 0.0:
         return drawn
     world = drawn.scenario.world
@@ -494,7 +502,7 @@ def run_suite(
     else:
         outcomes = in_order(run_suite_mission, specs, jobs, progress)
     for name, batch in batches:
-        low, high = _world_class(batch[0].class_path).world.vehicle.speed_mps
+        low, high = _world_class(batch[0].class_path, batch[0].overrides).world.vehicle.speed_mps
         yield summarise_class(name, [next(outcomes) for _ in range(runs)], speed_drawn=high > low)
 
 
@@ -515,7 +523,7 @@ def class_missions(
     if not (math.isfinite(time_scale) and time_scale > 0):
         raise ValueError("time_scale must be a positive number")
     config = service_config(config_path, tuple(overrides))
-    classes = [_world_class(str(path)) for path in class_files]
+    classes = [_world_class(str(path), tuple(overrides)) for path in class_files]
     for c in classes:
         draw_scenario(c, first_seed, config)
     seeds = range(first_seed, first_seed + runs)

@@ -188,6 +188,30 @@ def test_an_arrival_radius_makes_every_vehicle_stop_short_and_changes_nothing_el
     assert (short.scenario.config, short.time_limit_s) == (plain.scenario.config, plain.time_limit_s)
 
 
+def test_a_world_override_stresses_every_class_and_changes_nothing_else() -> None:
+    """``--set world.KEY=VALUE`` replaces one world range of every class (a stress test: a flow
+    sensor biased by up to 15 degrees where the suite draws 5); the service configuration and the
+    rest of each drawn world stay as they were."""
+    steady = str(next(path for path in suite.suite_classes() if path.stem == "steady"))
+    stress = ("world.flow_sensor.bias_deg=[-15.0, 15.0]",)
+    biases = []
+    for seed in range(10):
+        plain = suite.drawn_world(suite.SuiteMission(steady, seed))
+        biased = suite.drawn_world(suite.SuiteMission(steady, seed, overrides=stress))
+        assert abs(plain.scenario.world.flow_sensor.bias_deg) <= 5.0
+        biases.append(abs(biased.scenario.world.flow_sensor.bias_deg))
+        sensor = plain.scenario.world.flow_sensor
+        assert biased.scenario.world.model_copy(update={"flow_sensor": sensor}) == plain.scenario.world
+        assert biased.scenario.config == plain.scenario.config
+    assert 5.0 < max(biases) <= 15.0
+
+
+def test_a_bad_world_override_names_its_key(capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["bench", "suite", "--class", "steady", "--runs", "1", "--set", "world.flow_sensor.bogus=1"]
+    assert main(args) == 2
+    assert "world.flow_sensor.bogus: unknown key" in capsys.readouterr().err
+
+
 def test_a_time_scale_stretches_every_limit_and_says_it_is_a_diagnostic(
     capsys: pytest.CaptureFixture[str],
 ) -> None:
