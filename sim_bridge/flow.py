@@ -137,6 +137,8 @@ class MeanderingFlow(_Clocked):
         self._mode_std = strength_mps / math.sqrt(modes)
         self._uniform = rng.normal(0.0, self._uniform_std, 2)
         self._amplitude = rng.normal(0.0, self._mode_std, modes)
+        self._mode_velocity = self._amplitude[:, None] * self._normal
+        """(modes, 2): each mode's velocity at unit cosine, its amplitude along its normal."""
 
     def _evolve(self, dt_s: float) -> None:
         rho = math.exp(-dt_s / self._tau_s)
@@ -146,6 +148,7 @@ class MeanderingFlow(_Clocked):
         self._amplitude = rho * self._amplitude + kick * self._mode_std * self._rng.standard_normal(
             self._amplitude.size
         )
+        self._mode_velocity = self._amplitude[:, None] * self._normal
 
     def velocity(self, x_m: FloatArray, y_m: FloatArray) -> tuple[FloatArray, FloatArray]:
         x = np.asarray(x_m, dtype=float)
@@ -162,12 +165,6 @@ class MeanderingFlow(_Clocked):
         u = self._mean[0] + self._uniform[0] + uv[..., 0]
         v = self._mean[1] + self._uniform[1] + uv[..., 1]
         return np.asarray(u, dtype=float), np.asarray(v, dtype=float)
-
-    @property
-    def _mode_velocity(self) -> FloatArray:
-        """(modes, 2): each mode's velocity at unit cosine, its amplitude along its normal."""
-        out: FloatArray = self._amplitude[:, None] * self._normal
-        return out
 
 
 class TurbulentFlow(_Clocked):
