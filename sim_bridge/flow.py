@@ -136,19 +136,22 @@ class MeanderingFlow(_Clocked):
         self._uniform_std = strength_mps / 2.0
         self._mode_std = strength_mps / math.sqrt(modes)
         self._uniform = rng.normal(0.0, self._uniform_std, 2)
-        self._amplitude = rng.normal(0.0, self._mode_std, modes)
-        self._mode_velocity = self._amplitude[:, None] * self._normal
-        """(modes, 2): each mode's velocity at unit cosine, its amplitude along its normal."""
+        self._set_amplitude(rng.normal(0.0, self._mode_std, modes))
 
     def _evolve(self, dt_s: float) -> None:
         rho = math.exp(-dt_s / self._tau_s)
         kick = math.sqrt(1.0 - rho * rho)
         # exact Ornstein-Uhlenbeck step: a <- rho a + s sqrt(1 - rho^2) xi
         self._uniform = rho * self._uniform + kick * self._uniform_std * self._rng.standard_normal(2)
-        self._amplitude = rho * self._amplitude + kick * self._mode_std * self._rng.standard_normal(
-            self._amplitude.size
+        self._set_amplitude(
+            rho * self._amplitude + kick * self._mode_std * self._rng.standard_normal(self._amplitude.size)
         )
-        self._mode_velocity = self._amplitude[:, None] * self._normal
+
+    def _set_amplitude(self, amplitude: FloatArray) -> None:
+        """The modes' amplitudes, and with them each mode's velocity at unit cosine (modes, 2),
+        which ``velocity`` uses at every puff."""
+        self._amplitude = amplitude
+        self._mode_velocity = amplitude[:, None] * self._normal
 
     def velocity(self, x_m: FloatArray, y_m: FloatArray) -> tuple[FloatArray, FloatArray]:
         x = np.asarray(x_m, dtype=float)

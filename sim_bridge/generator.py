@@ -45,7 +45,7 @@ from service.core.config import Config, apply_override, load_config, parse_overr
 from service.core.errors import ConfigError
 from service.core.grid import Grid, Rectangle
 from sim_bridge.autopilot import AUTOPILOTS, VehicleKind
-from sim_bridge.scenarios import Scenario, WorldSpec
+from sim_bridge.scenarios import WORLD_KEY, Scenario, WorldSpec
 
 SUITE_DIR = Path(__file__).resolve().parent.parent / "config" / "suites"
 
@@ -212,7 +212,7 @@ def load_class(path: str | Path, overrides: Sequence[str] = ()) -> WorldClass:
     world = dict(data.get("world", {}))
     for text in overrides:
         key, value = parse_override(text)
-        if key[0] != "world":
+        if key[0] != WORLD_KEY:
             raise ConfigError(f"--set {text}: a class's worlds take world.KEY=VALUE only")
         apply_override(world, key[1:], value, text)
     area = data.get("area", {})

@@ -23,7 +23,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from service.core.config import Config, load_config
+from service.core.config import Config, load_config, parse_override
 from service.tools.bench.search import FailureClass, MissionResult, run_mission
 from service.tools.bench.workers import in_order
 from sim_bridge.generator import (
@@ -34,7 +34,7 @@ from sim_bridge.generator import (
     draw_scenario,
     load_class,
 )
-from sim_bridge.scenarios import place
+from sim_bridge.scenarios import WORLD_KEY, place
 
 SUMMARY_KEYS = ("classes", "missions", "worst_class", "worst_success_rate", "wrong_rate", "missions_per_s")
 
@@ -71,7 +71,7 @@ class SuiteMission:
 def world_overrides(overrides: Sequence[str]) -> tuple[str, ...]:
     """The ``--set`` overrides under ``world.``: they change every class's world ranges (a stress
     test: ``world.flow_sensor.bias_deg=[-15, 15]``); the others are the service's."""
-    return tuple(text for text in overrides if text.strip().startswith("world."))
+    return tuple(text for text in overrides if parse_override(text)[0][0] == WORLD_KEY)
 
 
 @lru_cache(maxsize=64)
