@@ -81,6 +81,24 @@ def _serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def _preflight_arguments(parser: argparse.ArgumentParser) -> None:
+    _serve_arguments(parser)
+    parser.add_argument(
+        "--seconds", type=_finite(zero=False), default=10.0, help="how long to listen (default 10)"
+    )
+    parser.add_argument("--json", action="store_true", help="one JSON object instead of the table")
+
+
+def _preflight(args: argparse.Namespace) -> int:
+    from service.app.preflight import as_json, preflight, render
+    from service.core.config import load_config
+
+    config = load_config(args.config, args.set)
+    checks = preflight(config, args.seconds)
+    print(as_json(checks) if args.json else render(checks, config, args.seconds))
+    return 1 if any(c.status == "FAIL" for c in checks) else 0
+
+
 # -- sim, stub, sitl-bridge: the simulated world ------------------------------------------------
 
 
@@ -436,6 +454,14 @@ def _bench(args: argparse.Namespace) -> int:
 COMMANDS: dict[str, Command] = {
     "bench": Command("benchmarks (mapping speed and memory, ...)", _bench_arguments, _bench),
     "serve": Command("run the onboard service", _serve_arguments, _serve),
+    "preflight": Command(
+        "listen to the vehicle as the service would and say what it lacks (commands nothing)",
+        _preflight_arguments,
+        _preflight,
+        description="Open the service's MAVLink connection for a few seconds, send its heartbeat and "
+        "stream requests (never a setpoint), and check the autopilot, mavlink.guided_mode, position, "
+        "flow and chemical streams, the link and recorder.dir. Exit status 1 if a check fails.",
+    ),
     "sim": Command(
         "one closed-loop mission: vehicle stub + plume + service on loopback", _sim_arguments, _sim
     ),
