@@ -460,7 +460,8 @@ COMMANDS: dict[str, Command] = {
         _preflight,
         description="Open the service's MAVLink connection for a few seconds, send its heartbeat and "
         "stream requests (never a setpoint), and check the autopilot, mavlink.guided_mode, position, "
-        "flow and chemical streams, the link and recorder.dir. Exit status 1 if a check fails.",
+        "flow and chemical streams, the link, the Zenoh session and recorder.dir. Exit status 1 if a check "
+        "fails.",
     ),
     "sim": Command(
         "one closed-loop mission: vehicle stub + plume + service on loopback", _sim_arguments, _sim

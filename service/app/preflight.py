@@ -5,9 +5,9 @@ that the service will hear what it needs: the autopilot's heartbeat, a position,
 chemical sensor, at the rates a 1 Hz map needs, and that ``mavlink.guided_mode`` is the GUIDED
 mode of this autopilot. The preflight opens the same MAVLink connection as ``oslim serve`` (with
 signing, when configured), sends the onboard computer's HEARTBEAT, asks the autopilot for the
-same streams, and decodes every message with the service's own decoder for a few seconds. It
-never sends a setpoint. Then each check is judged: a FAIL is something the search cannot work
-without, a WARN something that will cost it.
+same streams, opens its Zenoh session, and decodes every message with the service's own decoder
+for a few seconds. It never sends a setpoint. Then each check is judged: a FAIL is something the
+search cannot work without, a WARN something that will cost it.
 
 ``Tally`` and ``assess`` are pure (tests drive them with made-up telemetry); ``listen`` is the edge.
 """
@@ -28,10 +28,13 @@ from typing import Any
 from service.app.gate import CommandGate
 from service.app.service import STREAMS
 from service.core.config import Config
+from service.core.errors import LinkError
+from service.core.grid import Grid
 from service.core.samples import ChemSample, DetectionSample, FlowSample, Position
 from service.edges.mavlink_link import LinkCounters, MavlinkLink
 from service.edges.signing import SigningCounters, load_signing_key
 from service.edges.telemetry import Heartbeat, Rejected, Telemetry, TelemetrySettings, decode
+from service.edges.zenoh_link import ZenohLink
 
 MIN_RATE_HZ = 1.0
 """Slowest stream the 1 Hz map can live with: every tick needs a position, a flow and a reading."""
@@ -113,6 +116,8 @@ class Tally:
     detections_on: int = 0
     link: LinkCounters | None = None
     signing: SigningCounters | None = None
+    zenoh: tuple[int, int] | str | None = None
+    """Routers and peers the Zenoh session reached, or why it did not open (None: not tried)."""
 
     def add(self, kind: str, item: Telemetry | Rejected, threshold: float) -> None:
         """Count one decoded message of MAVLink type ``kind``."""
@@ -160,6 +165,7 @@ def assess(tally: Tally, config: Config, recorder: tuple[bool, str]) -> list[Che
         _flow(tally, config),
         _chemical(tally, config),
         _link(tally, config),
+        _zenoh(tally, config),
         Check("recorder", Status.PASS if recorder[0] else Status.FAIL, recorder[1]),
         _commanding(tally, config),
     ]
@@ -172,7 +178,8 @@ def _autopilot(tally: Tally, config: Config) -> Check:
             "autopilot",
             Status.FAIL,
             f"no autopilot HEARTBEAT in {tally.window_s:g} s on {config.mavlink.url}: check mavlink.url "
-            "(port, baud) and that the autopilot sends there (udpin hears only what is sent to it)",
+            "(port, baud) and that the autopilot sends there (udpin hears only what is sent to it); "
+            "stop oslim serve first, which may hold the port",
         )
     family = ARDUPILOT_GUIDED.get(hb.vehicle_type, (f"MAV_TYPE {hb.vehicle_type}", 0))[0]
     maker = {MAV_AUTOPILOT_ARDUPILOTMEGA: "ArduPilot", MAV_AUTOPILOT_PX4: "PX4"}.get(
@@ -325,6 +332,19 @@ def _link(tally: Tally, config: Config) -> Check:
     return Check("link", Status.PASS, f"{received} messages, none corrupt or ignored{signed}")
 
 
+def _zenoh(tally: Tally, config: Config) -> Check:
+    z, reached = config.zenoh, tally.zenoh
+    if reached is None:
+        return Check("zenoh", Status.WARN, "not checked")
+    if isinstance(reached, str):
+        return Check("zenoh", Status.FAIL, f"{reached} (is the service running? it holds zenoh.listen)")
+    routers, peers = reached
+    text = f"session open ({z.mode}), connected to {routers} router(s) and {peers} peer(s)"
+    if z.connect and routers + peers == 0:
+        return Check("zenoh", Status.WARN, f"{text}: none of zenoh.connect {z.connect} answered")
+    return Check("zenoh", Status.PASS, text)
+
+
 def _commanding(tally: Tally, config: Config) -> Check:
     """What the command gate would say now (information: the pilot hands over later)."""
     gate = CommandGate(config.mavlink.guided_mode, config.mavlink.link_timeout_s)
@@ -392,7 +412,17 @@ async def listen(config: Config, window_s: float) -> Tally:
 
         tasks = [asyncio.create_task(read()), asyncio.create_task(beat())]
         try:
-            await asyncio.sleep(window_s)
+            async with contextlib.AsyncExitStack() as stack:
+                zenoh: ZenohLink | None = None
+                try:
+                    zenoh = await stack.enter_async_context(
+                        ZenohLink.from_config(config, Grid.from_config(config.area))
+                    )
+                except LinkError as exc:
+                    tally.zenoh = str(exc)
+                await asyncio.sleep(window_s)
+                if zenoh is not None:
+                    tally.zenoh = zenoh.connected()
         finally:
             for task in tasks:
                 task.cancel()

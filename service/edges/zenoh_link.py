@@ -163,6 +163,13 @@ class ZenohLink:
     def publish_obs(self, obs: Observation) -> None:
         self._put(OBS, json_payload(obs_json(obs)))
 
+    def connected(self) -> tuple[int, int]:
+        """How many Zenoh routers and peers the session is connected to now."""
+        if self._session is None:
+            raise LinkError("zenoh: the link is not open (use 'async with ZenohLink(...)')")
+        info = self._session.info
+        return len(list(info.routers_zid())), len(list(info.peers_zid()))
+
     def latest(self) -> dict[str, bytes]:
         """The latest payload of each key published so far (what the queryable answers)."""
         with self._lock:

@@ -35,6 +35,7 @@ def heard(window_s: float = 10.0, *, vehicle_type: int = ROVER, autopilot: int =
             tally.add("LOCAL_POSITION_NED", Position(t, 50.0, 0.0), 1.0)
             tally.add("WIND", FlowSample(t, 1.0, 0.0), 1.0)
         tally.add("NAMED_VALUE_FLOAT", ChemSample(t, 0.2), 1.0)
+    tally.zenoh = (0, 1)
     return tally
 
 
@@ -109,6 +110,22 @@ def test_what_would_cost_the_search_is_a_warning() -> None:
     assert "slower than the map's 1 Hz" in check.detail
 
 
+def test_zenoh_session_is_checked() -> None:
+    tally = heard()
+    assert (
+        "connected to 0 router(s) and 1 peer(s)" in by_name(assess(tally, Config(), WRITABLE))["zenoh"].detail
+    )
+    tally.zenoh = (0, 0)
+    router = build_config({"zenoh": {"mode": "client", "connect": ["tcp/10.0.0.1:7447"]}})
+    check = by_name(assess(tally, router, WRITABLE))["zenoh"]
+    assert check.status is Status.WARN
+    assert "none of zenoh.connect" in check.detail
+    tally.zenoh = "zenoh: cannot open a session: address in use"
+    check = by_name(assess(tally, Config(), WRITABLE))["zenoh"]
+    assert check.status is Status.FAIL
+    assert "address in use" in check.detail
+
+
 def test_signing_on_without_a_signed_message_fails() -> None:
     config = build_config({"mavlink": {"signing_key_file": "/etc/oslim/key"}})
     tally = heard()
@@ -159,7 +176,12 @@ async def stub_on(port: int, **options: object) -> AsyncIterator[VehicleStub]:
 
 
 def loopback(port: int, tmp_path: Path) -> list[str]:
-    return [f"mavlink.url=udpin:127.0.0.1:{port}", f"recorder.dir={tmp_path / 'runs'}"]
+    return [
+        f"mavlink.url=udpin:127.0.0.1:{port}",
+        f"recorder.dir={tmp_path / 'runs'}",
+        "zenoh.multicast_scouting=false",
+        'zenoh.listen=["tcp/127.0.0.1:0"]',
+    ]
 
 
 @pytest.mark.sim

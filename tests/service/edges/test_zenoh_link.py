@@ -238,3 +238,19 @@ def test_a_port_in_use_is_a_link_error() -> None:
 
         with pytest.raises(LinkError, match="cannot open"):
             asyncio.run(main())
+
+
+def test_connected_counts_the_peers_that_reached_the_link() -> None:
+    port = free_port()
+
+    async def body() -> None:
+        async with ZenohLink(link_config(port), VEHICLE, GRID, extra=NO_MULTICAST) as link:
+            assert link.connected() == (0, 0)
+            with zenoh.open(peer_config(port)):
+                async with asyncio.timeout(TIMEOUT_S):
+                    while link.connected() != (0, 1):
+                        await asyncio.sleep(0.05)
+
+    asyncio.run(body())
+    with pytest.raises(LinkError, match="not open"):
+        ZenohLink(link_config(port), VEHICLE, GRID).connected()
