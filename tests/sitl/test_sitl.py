@@ -14,6 +14,7 @@ from typing import Any
 
 import pytest
 
+from service.app.preflight import Status, preflight
 from service.app.service import Service
 from service.core.config import Config, load_config
 from service.tools.sim import within_one_cell
@@ -147,6 +148,27 @@ def test_streams_guided_armed_gate_and_hold(sitl: Sitl, tmp_path: Path) -> None:
     assert out["moved_m"] > 1.0  # ArduPilot followed the service's setpoints
     assert out["setpoints_in_hold"] == 0
     assert out["drift_in_hold_m"] < 0.5
+
+
+def test_preflight_hears_sitl_as_the_service_would(sitl: Sitl, tmp_path: Path) -> None:
+    pilot = sitl.pilot
+    overrides = ["area.x_min=-50.0", "area.x_max=50.0"]  # SITL starts at its origin: mid-area
+    config = service_config(load_config(None, overrides), f"tcp:127.0.0.1:{sitl.companion_port}", tmp_path)
+    pilot.param("CHEM_ENABLE", 1)
+    pilot.param("CHEM_RATE", 5)
+    try:
+        checks = {c.name: c for c in preflight(config, 8.0)}
+    finally:
+        pilot.param("CHEM_ENABLE", 0)
+    print("SITL preflight:", json.dumps({n: [c.status.value, c.detail] for n, c in checks.items()}))
+    assert checks["autopilot"].status is Status.PASS
+    assert "ArduPilot Rover" in checks["autopilot"].detail
+    assert checks["guided mode"].status is Status.PASS  # Rover's GUIDED is the default 15
+    assert checks["position"].status is Status.PASS
+    assert checks["chemical"].status is Status.PASS
+    # the windvane's WIND is heard (this SITL build's reads 0 m/s: a warning, not a failure)
+    assert checks["flow"].status in (Status.PASS, Status.WARN)
+    assert "WIND" in checks["flow"].detail
 
 
 def test_mission_through_sitl_bridge_declares_the_source(sitl: Sitl, tmp_path: Path) -> None:
