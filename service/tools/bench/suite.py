@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import numpy as np
+from scipy.stats import binomtest
 
 from service.core.config import Config, load_config, parse_override
 from service.tools.bench.search import FailureClass, MissionResult, run_mission
@@ -40,10 +41,21 @@ SUMMARY_KEYS = ("classes", "missions", "worst_class", "worst_success_rate", "wro
 
 
 HEADER = (
-    f"{'class':<16}{'runs':>5}{'success':>9}{'wrong':>7}{'median s':>10}{'p90 s':>8}"
+    f"{'class':<16}{'runs':>5}{'success':>9}{'95% CI':>10}{'wrong':>7}{'median s':>10}{'p90 s':>8}"
     f"{'limit s':>9}{'path m':>8}"
     "  failures: never smelled / not reached / undeclared / wrong"
 )
+
+
+def interval(successes: int, runs: int) -> tuple[float, float]:
+    """The 95 % Wilson score interval of a rate seen ``successes`` times in ``runs``: what the seeds
+    allow the true rate to be (at 20 missions a class, 80 % seen is 58-92 %)."""
+    ci = binomtest(successes, runs).proportion_ci(0.95, method="wilson")
+    return float(ci.low), float(ci.high)
+
+
+def _span(bounds: tuple[float, float]) -> str:
+    return f"{bounds[0] * 100:.0f}-{bounds[1] * 100:.0f}%"
 
 
 def _fmt(value: float | None) -> str:
@@ -337,10 +349,16 @@ class ClassSummary:
         f = self.failures
         counts = " / ".join(str(f.get(kind, 0)) for kind in FailureClass)
         return (
-            f"{self.name:<16}{self.runs:>5}{self.success_rate:>9.1%}{self.wrong_declarations:>7}"
+            f"{self.name:<16}{self.runs:>5}{self.success_rate:>9.1%}{_span(self.success_interval):>10}"
+            f"{self.wrong_declarations:>7}"
             f"{_fmt(self.median_time_s):>10}{_fmt(self.p90_time_s):>8}{self.max_time_s:>9.0f}"
             f"{self.median_path_m:>8.0f}  {counts}"
         )
+
+    @property
+    def success_interval(self) -> tuple[float, float]:
+        """The 95 % interval of the success rate over these seeds (``interval``)."""
+        return interval(round(self.success_rate * self.runs), self.runs)
 
     def as_row(self) -> dict[str, Any]:
         """The JSON object of ``oslim bench suite --json`` for this class."""
@@ -348,6 +366,7 @@ class ClassSummary:
             "class": self.name,
             "runs": self.runs,
             "success_rate": self.success_rate,
+            "success_interval": list(self.success_interval),
             "wrong_declarations": self.wrong_declarations,
             "median_time_s": self.median_time_s,
             "p90_time_s": self.p90_time_s,
@@ -391,8 +410,10 @@ class SuiteSummary:
     missions: int
     worst_class: str
     worst_success_rate: float
+    worst_success_interval: tuple[float, float]
     wrong_rate: float
     """Wrong declarations per mission, over the whole suite."""
+    wrong_interval: tuple[float, float]
     missions_per_s: float
     elapsed_s: float
     calibration: Calibration = field(default_factory=Calibration)
@@ -410,9 +431,10 @@ class SuiteSummary:
             + f"{self.speeds.line()} (classes that draw the speed: {self.speed_classes})"
             + "\n"
             + (
-                f"summary: worst class {self.worst_class} {self.worst_success_rate:.1%}; wrong declarations "
-                f"{self.wrong_rate:.2%} of {self.missions} missions; {self.missions_per_s:.2f} missions/s "
-                f"({self.elapsed_s:.0f} s)"
+                f"summary: worst class {self.worst_class} {self.worst_success_rate:.1%} "
+                f"(95% CI {_span(self.worst_success_interval)}); wrong declarations {self.wrong_rate:.2%} of "
+                f"{self.missions} missions (95% CI up to {self.wrong_interval[1]:.2%}); "
+                f"{self.missions_per_s:.2f} missions/s ({self.elapsed_s:.0f} s)"
             )
         )
 
@@ -420,6 +442,8 @@ class SuiteSummary:
         """The last JSON object of ``oslim bench suite --json`` (``"summary": true``)."""
         row: dict[str, Any] = {"summary": True}
         row.update({key: getattr(self, key) for key in SUMMARY_KEYS})
+        row["worst_success_interval"] = list(self.worst_success_interval)
+        row["wrong_interval"] = list(self.wrong_interval)
         row["elapsed_s"] = self.elapsed_s
         c = self.calibration
         row["declarations"] = c.declarations
@@ -436,12 +460,15 @@ class SuiteSummary:
 def summarise_suite(classes: Sequence[ClassSummary], elapsed_s: float) -> SuiteSummary:
     worst = min(classes, key=lambda c: c.success_rate)
     missions = sum(c.runs for c in classes)
+    wrong = sum(c.wrong_declarations for c in classes)
     return SuiteSummary(
         classes=len(classes),
         missions=missions,
         worst_class=worst.name,
         worst_success_rate=worst.success_rate,
-        wrong_rate=sum(c.wrong_declarations for c in classes) / missions,
+        worst_success_interval=worst.success_interval,
+        wrong_rate=wrong / missions,
+        wrong_interval=interval(wrong, missions),
         missions_per_s=missions / elapsed_s if elapsed_s > 0 else math.inf,
         elapsed_s=elapsed_s,
         calibration=sum((c.calibration for c in classes), Calibration()),

@@ -76,6 +76,27 @@ def test_text_output_names_the_worst_class(capsys: pytest.CaptureFixture[str]) -
     assert "summary: worst class" in out
     assert "came true" in out  # the calibration table's header
     assert "missions/s" in out
+    assert "95% CI" in out
+
+
+def test_rates_come_with_the_interval_the_seeds_allow() -> None:
+    """Wilson score intervals, against values worked by hand: p = k/n, z = 1.96,
+    (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n)."""
+    assert suite.interval(16, 20) == pytest.approx((0.5840, 0.9193), abs=1e-4)
+    assert suite.interval(0, 20) == pytest.approx((0.0, 0.1611), abs=1e-4)
+    assert suite.interval(2, 1300)[1] == pytest.approx(0.00559, abs=1e-5)  # 0.15 % seen: up to 0.56 %
+    lo, hi = suite.interval(95, 100)
+    assert lo < 0.95 < hi  # 95 of 100 does not establish 95 %
+    outcomes = [
+        (MissionResult(k, 0.0, 0.0, k < 16, k < 16, 10.0, None, None, None, 10.0, 1.0), 300.0)
+        for k in range(20)
+    ]
+    row = suite.summarise_class("steady", outcomes)
+    assert "58-92%" in row.line()
+    assert row.as_row()["success_interval"] == pytest.approx([0.5840, 0.9193], abs=1e-4)
+    summary = suite.summarise_suite([row], 10.0)
+    assert "worst class steady 80.0% (95% CI 58-92%)" in summary.line()
+    assert "0.00% of 20 missions (95% CI up to 16.11%)" in summary.line()
 
 
 def test_an_unknown_class_or_key_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
