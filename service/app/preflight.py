@@ -181,17 +181,16 @@ def _autopilot(tally: Tally, config: Config) -> Check:
             "(port, baud) and that the autopilot sends there (udpin hears only what is sent to it); "
             "stop oslim serve first, which may hold the port",
         )
-    family = ARDUPILOT_GUIDED.get(hb.vehicle_type, (f"MAV_TYPE {hb.vehicle_type}", 0))[0]
-    maker = {MAV_AUTOPILOT_ARDUPILOTMEGA: "ArduPilot", MAV_AUTOPILOT_PX4: "PX4"}.get(
-        hb.autopilot, f"autopilot {hb.autopilot}"
-    )
-    if hb.autopilot != MAV_AUTOPILOT_ARDUPILOTMEGA:
-        family = f"MAV_TYPE {hb.vehicle_type}"
+    kind = f"MAV_TYPE {hb.vehicle_type}"
+    if hb.autopilot == MAV_AUTOPILOT_ARDUPILOTMEGA:
+        what = f"ArduPilot {ARDUPILOT_GUIDED.get(hb.vehicle_type, (kind, 0))[0]}"
+    elif hb.autopilot == MAV_AUTOPILOT_PX4:
+        what = f"PX4 {kind}"
+    else:
+        what = f"autopilot {hb.autopilot} {kind}"
     armed = "armed" if hb.armed else "disarmed"
     return Check(
-        "autopilot",
-        Status.PASS,
-        f"system {hb.system}: {maker} {family}, {armed}, custom_mode {hb.custom_mode}",
+        "autopilot", Status.PASS, f"system {hb.system}: {what}, {armed}, custom_mode {hb.custom_mode}"
     )
 
 
