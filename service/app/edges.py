@@ -124,14 +124,7 @@ async def open_edges(
 ) -> AsyncIterator[Edges]:
     """The real edges: MAVLink (pymavlink), Zenoh, the Foxglove live view (``foxglove.listen``;
     it mirrors the recording) and the MCAP recorder, in that order."""
-    mavlink = config.mavlink
-    link_edge = MavlinkLink(
-        mavlink.url,
-        clock=clock,
-        queue_size=mavlink.queue_size,
-        signing_key=signing_key,
-        signing_link_id=mavlink.signing_link_id,
-    )
+    link_edge = MavlinkLink.from_config(config.mavlink, clock=clock, signing_key=signing_key)
     async with link_edge as link, ZenohLink.from_config(config, grid) as zenoh_link:
         with (
             open_live_view(config.foxglove.listen) as live,

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from service.app.gate import CommandGate
-from service.app.service import STREAMS
+from service.app.service import request_streams
 from service.core.config import Config
 from service.core.errors import LinkError
 from service.core.grid import Grid
@@ -372,21 +372,10 @@ async def listen(config: Config, window_s: float) -> Tally:
     """Hear the vehicle for ``window_s`` seconds as ``oslim serve`` would, commanding nothing."""
     mav = config.mavlink
     key = load_signing_key(mav.signing_key_file) if mav.signing_key_file else None
-    settings = TelemetrySettings(
-        chem_name=config.sensor.name,
-        detection_name=config.sensor.detection_name,
-        max_flow_mps=config.sensor.max_flow_mps,
-        origin=(mav.origin[0], mav.origin[1]) if mav.origin else None,
-    )
+    settings = TelemetrySettings.from_config(config)
     tally = Tally(window_s)
     loop = asyncio.get_running_loop()
-    async with MavlinkLink(
-        mav.url,
-        clock=loop.time,
-        queue_size=mav.queue_size,
-        signing_key=key,
-        signing_link_id=mav.signing_link_id,
-    ) as link:
+    async with MavlinkLink.from_config(mav, clock=loop.time, signing_key=key) as link:
 
         async def read() -> None:
             async for stamp, msg in link:
@@ -401,11 +390,7 @@ async def listen(config: Config, window_s: float) -> Tally:
                 hb = tally.heartbeat
                 if hb is not None and not asked:
                     link.adopt_system(hb.system)
-                    streams = dict(STREAMS)
-                    if settings.origin is not None:
-                        streams["GLOBAL_POSITION_INT"] = 33
-                    for message_id in streams.values():
-                        link.request_interval(hb.system, message_id, mav.stream_hz)
+                    request_streams(link, hb.system, settings, mav.stream_hz)
                     asked = True
                 await asyncio.sleep(1.0)
 

@@ -58,6 +58,17 @@ STREAMS = {"LOCAL_POSITION_NED": 32, "WIND": 168, "WIND_COV": 231}
 """Messages the service asks the autopilot for (MAVLink message ids)."""
 
 
+def request_streams(link: VehicleLink, system: int, settings: TelemetrySettings, rate_hz: float) -> list[str]:
+    """Ask autopilot ``system`` for ``STREAMS`` (and GLOBAL_POSITION_INT when an origin is set) at
+    ``rate_hz``; the names asked for."""
+    streams = dict(STREAMS)
+    if settings.origin is not None:
+        streams["GLOBAL_POSITION_INT"] = 33
+    for message_id in streams.values():
+        link.request_interval(system, message_id, rate_hz)
+    return list(streams)
+
+
 class Clock:
     """Service time in seconds: monotonic, scaled by ``speed`` (> 1 runs faster than real time)."""
 
@@ -136,12 +147,7 @@ class Service:
         self.search = Search(config)
         self.grid = self.search.grid
         self.gate = CommandGate(config.mavlink.guided_mode, config.mavlink.link_timeout_s)
-        self.settings = TelemetrySettings(
-            chem_name=config.sensor.name,
-            detection_name=config.sensor.detection_name,
-            max_flow_mps=config.sensor.max_flow_mps,
-            origin=(config.mavlink.origin[0], config.mavlink.origin[1]) if config.mavlink.origin else None,
-        )
+        self.settings = TelemetrySettings.from_config(config)
         self.stats = ServiceStats()
         self.scene = SceneBuilder(
             min(self.grid.cell_width_m, self.grid.cell_height_m), config.declaration.radius_m
@@ -274,13 +280,10 @@ class Service:
             now = self.clock.now()
             alive = self.gate.link_alive(now)
             if alive and not self._link_was_alive and self.gate.system is not None:
-                streams = dict(STREAMS)
-                if self.settings.origin is not None:
-                    streams["GLOBAL_POSITION_INT"] = 33
-                for msg_id in streams.values():
-                    link.request_interval(self.gate.system, msg_id, self.config.mavlink.stream_hz)
+                rate_hz = self.config.mavlink.stream_hz
+                streams = request_streams(link, self.gate.system, self.settings, rate_hz)
                 log.info("autopilot %d heard: requested %s at %.1f Hz", self.gate.system, ", ".join(streams),
-                         self.config.mavlink.stream_hz)  # fmt: skip
+                         rate_hz)  # fmt: skip
             self._link_was_alive = alive
             await self.clock.sleep_until(now + 1.0)
 

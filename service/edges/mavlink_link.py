@@ -16,11 +16,14 @@ import time
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
 from types import TracebackType
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
 from service.core.errors import LinkError
 from service.edges.mavlink_dialect import dialect, mavutil
 from service.edges.signing import SigningCounters, enable_signing
+
+if TYPE_CHECKING:
+    from service.core.config import MavlinkConfig
 
 log = logging.getLogger(__name__)
 
@@ -67,6 +70,19 @@ class MavlinkLink:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._mav = dialect()
+
+    @classmethod
+    def from_config(
+        cls, mavlink: MavlinkConfig, *, clock: Callable[[], float], signing_key: bytes | None
+    ) -> MavlinkLink:
+        """The link of ``[mavlink]``: its url, queue size and signing link id."""
+        return cls(
+            mavlink.url,
+            clock=clock,
+            queue_size=mavlink.queue_size,
+            signing_key=signing_key,
+            signing_link_id=mavlink.signing_link_id,
+        )
 
     async def __aenter__(self) -> Self:
         self._loop = asyncio.get_running_loop()

@@ -10,9 +10,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from service.core.samples import ChemSample, DetectionSample, FlowSample, Position
+
+if TYPE_CHECKING:
+    from service.core.config import Config
 
 MAV_MODE_FLAG_SAFETY_ARMED = 128
 MAV_AUTOPILOT_INVALID = 8
@@ -55,6 +58,17 @@ class TelemetrySettings:
     max_flow_mps: float = 20.0
     origin: tuple[float, float] | None = None
     """(lat_deg, lon_deg) of the local origin; None: GLOBAL_POSITION_INT is not used."""
+
+    @classmethod
+    def from_config(cls, config: Config) -> TelemetrySettings:
+        """The sensor names, flow bound and origin of ``config``'s [sensor] and [mavlink]."""
+        origin = config.mavlink.origin
+        return cls(
+            chem_name=config.sensor.name,
+            detection_name=config.sensor.detection_name,
+            max_flow_mps=config.sensor.max_flow_mps,
+            origin=(origin[0], origin[1]) if origin else None,
+        )
 
 
 def _name(raw: Any) -> str:
