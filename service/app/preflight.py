@@ -364,7 +364,8 @@ def recorder_writable(directory: str) -> tuple[bool, str]:
             pass
     except OSError as exc:
         return False, f"recorder.dir {directory}: cannot write there ({exc.strerror or exc})"
-    free_mb = os.statvfs(path).f_bavail * os.statvfs(path).f_frsize / 1e6
+    disk = os.statvfs(path)
+    free_mb = disk.f_bavail * disk.f_frsize / 1e6
     return True, f"recorder.dir {path.resolve()} writable, {free_mb:,.0f} MB free"
 
 
