@@ -108,7 +108,6 @@ class MappingConfig(_Section):
     sigma_x: float = Field(default=0.2, gt=0)
     sigma_y: float = Field(default=0.2, gt=0)
     forgetting: float = Field(default=0.003, ge=0, lt=1)
-    zero_lag: bool = True
     footprint_m: float = Field(default=0.8, ge=0)
     footprint_growth: float = Field(default=0.1, ge=0)
     wide_share: float = Field(default=0.3, ge=0, le=1)

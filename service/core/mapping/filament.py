@@ -227,7 +227,6 @@ def history_factors(
     sigma_x: float,
     sigma_y: float,
     *,
-    zero_lag: bool = False,
     reach_m: float = 0.0,
     footprint_m: float = 0.0,
     footprint_growth: float = 0.0,
@@ -235,15 +234,15 @@ def history_factors(
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """``filament_factors`` for flat cell ``cell`` over every release time in ``history``, and
     each release time's weight (``release_offsets``); with
-    ``zero_lag`` also the release of this very tick (lag 0, still at its source: the first row);
     ``reach_m`` > 0 adds the prehistory, its releases merged (eq. R1);
     ``footprint_m`` > 0 the point detector of eq. F1-F2, at ``at`` (the vehicle's position in
-    ``cell``; the cell's centre when None)."""
+    ``cell``; the cell's centre when None), which also smells the release of this very tick (lag
+    0, still at its source, within r0 of the detector: the first row). A continuous source has odour
+    at its own position now; the papers' cell detector counts the releases up to the previous tick
+    only, so a vehicle at the source expects odour only if last tick's filament has not left its
+    cell, and a point detector 1 m from that filament would expect none at the source at all."""
     lag, drift_x, drift_y, weight = release_offsets(history, reach_m, min(sigma_x, sigma_y))
-    if zero_lag:
-        # a continuous source has odour at its own position now; the papers' releases stop at the
-        # previous tick, so a vehicle in the source's cell would need last tick's filament not to
-        # have left the cell (it often has, at 1 m/s in a 2.5 m cell) to expect a detection
+    if footprint_m > 0.0:
         lag, drift_x, drift_y = (np.concatenate([[0.0], a]) for a in (lag, drift_x, drift_y))
         weight = np.concatenate([[1.0], weight])
     x, y = at if at is not None and footprint_m > 0.0 else grid.centre(cell)

@@ -46,9 +46,6 @@ class MapperParams:
     """P(detect | detectable odour in the cell): the papers' mu."""
     false_alarm: float = 0.001
     """P(detect | no odour): keeps a single spurious hit from zeroing the true cell."""
-    zero_lag: bool = False
-    """Count the filament released at the current tick (lag 0, at its source) besides the
-    window's (Bayesian and POMDP mappers; False: the papers' release times)."""
     miss_floor: float = 0.0
     """P(no detection | odour predicted in the vehicle's cell) never falls below this (0: the
     papers' models). A plume narrower than a cell, or intermittent, can leave a vehicle in a
@@ -105,7 +102,6 @@ class MapperParams:
             mu=s.detection_probability,
             false_alarm=s.false_alarm_probability,
             miss_floor=s.miss_floor,
-            zero_lag=m.zero_lag,
             footprint_m=m.footprint_m,
             footprint_growth=m.footprint_growth,
             wide_share=m.wide_share,
@@ -310,7 +306,6 @@ class ObservationModelMapper(SourceMapper):
             self.history,
             p.sigma_x * spread,
             p.sigma_y * spread,
-            zero_lag=p.zero_lag,
             reach_m=self._reach_m if p.prehistory else 0.0,
             footprint_m=p.footprint_m,
             footprint_growth=p.footprint_growth,

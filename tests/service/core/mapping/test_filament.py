@@ -211,15 +211,16 @@ def test_a_footprint_uses_the_position_in_the_cell_and_grows_with_age() -> None:
     history = [FlowStep(transition(SMALL, 1.0, 0.0, 1.0), 1.0, 0.0, 1.0)] * 3
     cell = SMALL.cell_of(5.0, 5.0)
     # without a footprint (the papers'), where in the cell the vehicle is does not matter
-    plain = history_factors(SMALL, cell, history, 0.2, 0.2, zero_lag=True, at=(4.1, 4.1))
-    centred = history_factors(SMALL, cell, history, 0.2, 0.2, zero_lag=True)
+    plain = history_factors(SMALL, cell, history, 0.2, 0.2, at=(4.1, 4.1))
+    centred = history_factors(SMALL, cell, history, 0.2, 0.2)
     for a, b in zip(plain, centred, strict=True):
         np.testing.assert_array_equal(a, b)
-    np.testing.assert_array_equal(plain[2], np.ones(4))  # this tick's release and the record's three
-    # with one, the filament released this tick is smelt only from within r0 of the source: from
-    # (4.1, 4.1) a source in the vehicle's own cell [4, 6] x [4, 6] is within 0.5 m in 0.3 of x
+    np.testing.assert_array_equal(plain[2], np.ones(3))  # the record's three, not this tick's release
+    # with one, the point detector also smells the filament released this tick, only from within r0
+    # of the source: from (4.1, 4.1) a source in the vehicle's own cell [4, 6] x [4, 6] is within
+    # 0.5 m in 0.3 of x
     px, py, _ = history_factors(
-        SMALL, cell, history, 0.2, 0.2, zero_lag=True, footprint_m=0.5, footprint_growth=0.1, at=(4.1, 4.1)
+        SMALL, cell, history, 0.2, 0.2, footprint_m=0.5, footprint_growth=0.1, at=(4.1, 4.1)
     )
     col, row = 2, 2
     assert px[0, col] == pytest.approx(0.6 / 2.0)

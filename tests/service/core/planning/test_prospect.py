@@ -72,7 +72,14 @@ def test_trace_distance_runs_along_the_flow_to_the_leg() -> None:
 def steady_mapper(grid: Grid, flow: tuple[float, float], ticks: int = 20) -> PomdpMapper:
     """The default POMDP model with ``ticks`` seconds of a steady flow, nothing observed."""
     params = MapperParams(
-        sigma_x=0.2, sigma_y=0.2, mu=0.9, false_alarm=0.1, miss_floor=0.3, zero_lag=True, prehistory=True
+        sigma_x=0.2,
+        sigma_y=0.2,
+        mu=0.9,
+        false_alarm=0.1,
+        miss_floor=0.3,
+        footprint_m=0.8,
+        footprint_growth=0.1,
+        prehistory=True,
     )
     mapper = PomdpMapper(grid, params)
     step = transition(grid, *flow, 1.0, params.sigma_x, params.sigma_y)
