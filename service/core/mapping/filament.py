@@ -240,12 +240,13 @@ def history_factors(
     0, still at its source, within r0 of the detector: the first row). A continuous source has odour
     at its own position now; the papers' cell detector counts the releases up to the previous tick
     only, so a vehicle at the source expects odour only if last tick's filament has not left its
-    cell, and a point detector 1 m from that filament would expect none at the source at all."""
+    cell, and a point detector 1 m from that filament would expect little odour at the source."""
     lag, drift_x, drift_y, weight = release_offsets(history, reach_m, min(sigma_x, sigma_y))
-    if footprint_m > 0.0:
+    point = footprint_m > 0.0
+    if point:
         lag, drift_x, drift_y = (np.concatenate([[0.0], a]) for a in (lag, drift_x, drift_y))
         weight = np.concatenate([[1.0], weight])
-    x, y = at if at is not None and footprint_m > 0.0 else grid.centre(cell)
+    x, y = at if at is not None and point else grid.centre(cell)
     px, py = filament_factors(
         grid,
         x,
