@@ -5,9 +5,10 @@ probe at the estimate. The rule itself is
 With ``declaration.check_width_m`` > 0 a rule that fires first sends the vehicle across the flow
 ``check_upflow_m`` upflow of the estimate (``Check``), and the source is declared when that pass
 is flown; odour found upflow of the estimate, or another estimate, calls it off. Near a cell whose
-pass was called off by odour upflow, the clean passes must outnumber the called-off ones: a patchy
-plume is missed on a pass now and then, and a rule that fires again after each call-off would
-otherwise end in the pass that missed. A plume that
+pass was called off by odour upflow of it, the clean passes must outnumber the called-off ones: a
+patchy plume is missed on a pass now and then, and a rule that fires again after each call-off
+would otherwise end in the pass that missed. A call-off counts against the cells its odour lies
+upflow of, not against one upflow of that odour, which it does not contradict. A plume that
 swung off the vehicle's line looks to the maps like the upflow end of a plume; the check looks
 for it where it would be. Steady odour near the estimate does not make the check needless: a
 strong plume is smelt as steadily far downflow of its source. At the estimate the vehicle probes
@@ -282,6 +283,34 @@ class EstimateProbe:
         return Pattern(pass_across(grid, *point, frame, self.across_m))
 
 
+@dataclass(frozen=True)
+class Pass:
+    """One check in the tally: the cell's centre (x, y), ``vote`` +1 flown clean or -1 called off
+    by odour upflow, and where that odour was (None: not known)."""
+
+    x: float
+    y: float
+    vote: int
+    odour: tuple[float, float] | None = None
+
+    def row(self) -> list[float]:
+        return [self.x, self.y, self.vote, *(self.odour or ())]
+
+    @classmethod
+    def of(cls, row: list[float]) -> Pass:
+        """The pass of a snapshot row (``row``'s form); ValueError for one malformed."""
+        values = [float(v) for v in row]
+        if (
+            len(values) not in (3, 5)
+            or not all(math.isfinite(v) for v in values)
+            or values[2] not in (1.0, -1.0)
+        ):
+            raise ValueError("malformed check tally")
+        x, y, vote = values[:3]
+        odour = (values[3], values[4]) if len(values) == 5 and vote < 0 else None
+        return cls(x, y, int(vote), odour)
+
+
 class Declaring:
     """Judges each tick whether the source may be declared: the rule (``Declarer``, armed at the
     first detection), then the check across the flow that vouches for the cell. Owns the check and
@@ -292,7 +321,7 @@ class Declaring:
     def __init__(self, grid: Grid, config: DeclarationConfig, admit: Callable[[int], bool] | None) -> None:
         self.grid = grid
         self.config = config
-        self._passes: list[tuple[float, float, int]] = []  # checked (x, y): +1 flown clean, -1 called off
+        self._passes: list[Pass] = []
         self._declarer = Declarer(grid, config, admit)
         self.check: Check | None = None  # the upflow check of a cell about to be declared
         reach_m = PROBE_REACH * math.hypot(grid.cell_width_m, grid.cell_height_m)
@@ -313,7 +342,7 @@ class Declaring:
         check = self.check
         if check is not None and not check.holds(obs, int(np.argmax(likelihood))):
             if obs.detected and check.odour_upflow(obs):
-                self._passes.append((check.found.x, check.found.y, -1))
+                self._passes.append(Pass(check.found.x, check.found.y, -1, (obs.x, obs.y)))
             self.check = None
 
     def reset(self) -> None:
@@ -366,30 +395,35 @@ class Declaring:
         Each pass is one draw of a patchy plume; counting only the last one would let a run of
         call-offs end in the one pass that happened to miss. A pass not enough yet is counted."""
         x, y = check.found.x, check.found.y
-        if self.passes_near(x, y) + 1 >= 1:
+        if self.passes_near(x, y, check.frame, check.cancel_upflow_m) + 1 >= 1:
             return True
-        self._passes.append((x, y, 1))
+        self._passes.append(Pass(x, y, 1))
         return False
 
     @property
-    def passes(self) -> list[tuple[float, float, int]]:
-        """Every check counted so far: (x, y) of its cell, +1 flown clean, -1 called off by odour
-        upflow (for the restart snapshot)."""
-        return list(self._passes)
+    def passes(self) -> list[list[float]]:
+        """Every check counted so far, for the restart snapshot: [x, y, 1] of a cell whose pass was
+        flown clean, [x, y, -1, odour x, odour y] of one called off by odour upflow."""
+        return [p.row() for p in self._passes]
 
-    def restore_passes(self, passes: list[tuple[float, float, int]]) -> None:
-        """Count ``passes`` (``passes``' form) as this mission's own; ValueError for a vote that is not
-        +1 or -1 or a point that is not finite."""
-        restored = [(float(x), float(y), int(vote)) for x, y, vote in passes]
-        if any(vote not in (1, -1) or not (math.isfinite(x) and math.isfinite(y)) for x, y, vote in restored):
-            raise ValueError("malformed check tally")
-        self._passes = restored
+    def restore_passes(self, rows: list[list[float]]) -> None:
+        """Count ``rows`` (``passes``' form; a call-off without its odour, from a snapshot written
+        before the odour was kept, counts against every cell near it) as this mission's own;
+        ValueError for a vote that is not +1 or -1 or a point that is not finite."""
+        self._passes = [Pass.of(row) for row in rows]
 
-    def passes_near(self, x: float, y: float) -> int:
-        """Clean passes less passes called off by odour upflow, of the checks within ``radius_m``
-        of (x, y)."""
+    def passes_near(self, x: float, y: float, frame: FlowFrame, cancel_upflow_m: float) -> int:
+        """Clean passes less passes called off by odour upflow of (x, y), of the checks within
+        ``radius_m`` of (x, y): odour at least ``cancel_upflow_m`` upflow of it along ``frame``
+        would have called off a check of (x, y) too."""
         r = self.config.radius_m
-        return sum(vote for cx, cy, vote in self._passes if math.hypot(cx - x, cy - y) <= r)
+        votes = 0
+        for p in self._passes:
+            if math.hypot(p.x - x, p.y - y) > r:
+                continue
+            against = p.odour is None or frame.along(x - p.odour[0], y - p.odour[1]) >= cancel_upflow_m
+            votes += 1 if p.vote > 0 else -1 if against else 0
+        return votes
 
     def _vouch(self, found: Declaration, frame: FlowFrame | None) -> CrossCheck | Check | None:
         """How ``found`` may be declared now without the upflow check (off); else the check of its

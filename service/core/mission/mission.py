@@ -121,7 +121,7 @@ class Mission:
             "last_detection_t": None if detection is None else detection[0],
             "last_detection_x": None if detection is None else detection[1],
             "last_detection_y": None if detection is None else detection[2],
-            "check_passes": [list(p) for p in self._declaring.passes],
+            "check_passes": self._declaring.passes,
         }
 
     def restore_state(self, state: dict[str, Any]) -> None:

@@ -666,7 +666,7 @@ def test_the_checks_tally_survives_a_restart() -> None:
     vehicle.move()
     mission.step(Observation(1.0, vehicle.x, vehicle.y, 1.0, 0.0, True), vehicle.state)  # odour 3 m upflow
     state = json.loads(json.dumps(mission.save_state()))  # as the snapshot stores it
-    assert state["check_passes"] == [[sx, sy, -1]]
+    assert state["check_passes"] == [[sx, sy, -1, sx - 3.0, sy + 6.0]]  # the cell, its vote, the odour
 
     def dry_ticks_to_declare(saved: dict[str, object]) -> int:
         restarted = mission_with(mapper, probability=0.8, check_width_m=6.0, check_upflow_m=3.0)
@@ -678,7 +678,9 @@ def test_the_checks_tally_survives_a_restart() -> None:
         return len(visited)
 
     forgotten = {k: v for k, v in state.items() if k != "check_passes"}  # a snapshot from before the tally
+    without_odour = {**state, "check_passes": [[sx, sy, -1]]}  # from before the odour was kept
     assert dry_ticks_to_declare(state) > dry_ticks_to_declare(forgotten)  # two clean passes, not one
+    assert dry_ticks_to_declare(without_odour) == dry_ticks_to_declare(state)
     with pytest.raises(ValueError, match="tally"):
         mission_with(mapper).restore_state({**state, "check_passes": [[sx, sy, 2]]})
 
