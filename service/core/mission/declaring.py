@@ -73,10 +73,18 @@ class Check:
     done: bool = False
 
     @classmethod
-    def across(cls, grid: Grid, found: Declaration, frame: FlowFrame, config: DeclarationConfig) -> Check:
-        """Legs ``check_width_m`` to each side across the flow, ``check_upflow_m`` upflow, and back
-        to the centre's line; or, when that point lies in an obstacle, just upflow of the obstacle:
-        a plume that crosses the obstacle cannot be met beside it, only beyond it.
+    def across(
+        cls,
+        grid: Grid,
+        found: Declaration,
+        frame: FlowFrame,
+        config: DeclarationConfig,
+        start: tuple[float, float] | None = None,
+    ) -> Check:
+        """Legs ``check_width_m`` to each side across the flow, ``check_upflow_m`` upflow, the side
+        nearer ``start`` (the vehicle) first, and back to the centre's line; or, when that point
+        lies in an obstacle, just upflow of the obstacle: a plume that crosses the obstacle cannot
+        be met beside it, only beyond it.
 
         The way back is a second crossing of the line: a sparse plume lies under a crossing vehicle
         for a few ticks only, and one crossing of a plume present in 40 % of the seconds misses it
@@ -85,6 +93,10 @@ class Check:
         clear = upflow_until(grid, found.x, found.y, frame, upflow, lambda x, y: not grid.in_obstacle(x, y))
         ax, ay = clear if clear is not None else (found.x - upflow * frame.ux, found.y - upflow * frame.uy)
         legs = pass_across(grid, ax, ay, frame, config.check_width_m)
+        if start is not None and len(legs) == 2:
+            first, second = ((end.x, end.y) for end in legs)
+            if math.dist(start, second) < math.dist(start, first):
+                legs = (legs[1], legs[0])
         if len(legs) == 2:
             low, high = sorted(frame.cross(end.x, end.y) for end in legs)
             line = min(max(frame.cross(ax, ay), low), high)
@@ -375,7 +387,7 @@ class Declaring:
             return self._declared(t, flown, CrossCheck.FLOWN)
         if found is None:
             return None
-        vouched = self._vouch(found, frame)
+        vouched = self._vouch(found, frame, (obs.x, obs.y))
         return self._declared(t, found, vouched) if isinstance(vouched, CrossCheck) else vouched
 
     def waypoints(
@@ -425,15 +437,17 @@ class Declaring:
             votes += 1 if p.vote > 0 else -1 if against else 0
         return votes
 
-    def _vouch(self, found: Declaration, frame: FlowFrame | None) -> CrossCheck | Check | None:
+    def _vouch(
+        self, found: Declaration, frame: FlowFrame | None, vehicle: tuple[float, float]
+    ) -> CrossCheck | Check | None:
         """How ``found`` may be declared now without the upflow check (off); else the check of its
-        cell, started now, or None while it goes on."""
+        cell, started now from ``vehicle``, or None while it goes on."""
         c = self.config
         if c.check_width_m <= 0.0 or frame is None:
             return CrossCheck.OFF
         if self.check is not None and self.check.cell == found.cell:
             return None
-        self.check = Check.across(self.grid, found, frame, c)
+        self.check = Check.across(self.grid, found, frame, c, vehicle)
         self.probe.detour = None
         return self.check
 

@@ -61,6 +61,17 @@ def test_the_check_crosses_the_flow_upflow_of_the_cell_and_comes_back_to_its_lin
     assert check.cancel_upflow_m == 1.5
 
 
+def test_the_check_flies_the_side_nearer_the_vehicle_first() -> None:
+    check = Check.across(AREA, found_at_source(), EAST, CONFIG, start=(SX, SY - 1.0))
+    assert check.pattern.vertices == (
+        Waypoint(SX - 3.0, SY - 6.0),
+        Waypoint(SX - 3.0, SY + 6.0),
+        Waypoint(SX - 3.0, SY),
+    )
+    left = Check.across(AREA, found_at_source(), EAST, CONFIG, start=(SX, SY + 1.0))
+    assert left.pattern.vertices[0] == Waypoint(SX - 3.0, SY + 6.0)
+
+
 def test_a_check_whose_line_lies_in_an_obstacle_crosses_the_flow_just_upflow_of_it() -> None:
     # the estimate (centre x = 22.5) 2.5 m from the downflow face of a wall 11 m deep: 3 m upflow is
     # inside the wall, where a plume crossing it cannot be met, so the check crosses beyond it
