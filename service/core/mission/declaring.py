@@ -4,7 +4,11 @@ probe at the estimate. The rule itself is
 
 With ``declaration.check_width_m`` > 0 a rule that fires first sends the vehicle across the flow
 ``check_upflow_m`` upflow of the estimate (``Check``), and the source is declared when that pass
-is flown; odour found upflow of the estimate, or another estimate, calls it off. Near a cell whose
+is flown and odour has been met at the cell again; odour found upflow of the estimate, or another
+estimate, calls it off, and so does no odour at the cell for ``RESMELL_WAIT_S`` after the pass.
+A source keeps releasing, so a plume stays anchored at it: coming back to the cell after the pass
+meets its odour within seconds, while the end of a plume swung aside by a meander has usually
+moved on by then (docs/search-benchmark.md, step 37). Near a cell whose
 pass was called off by odour upflow of it, the clean passes must outnumber the called-off ones: a
 patchy plume is missed on a pass now and then, and a rule that fires again after each call-off
 would otherwise end in the pass that missed. A call-off counts against the cells its odour lies
@@ -49,6 +53,12 @@ PASS_PROBE_MARGIN_M = 0.25
 PASS_PROBE_REACHED_M = 0.3
 """The upflow pass probe's point counts as reached this close to it."""
 STOPPED_M = 0.05
+RESMELL_WAIT_S = 15.0
+"""After its pass, a check waits this long for odour within ``radius_m`` of the cell, flying back
+to its line ``check_upflow_m / 2`` downflow of its centre (as far downflow as the odour that would
+call it off lies upflow). The suite's detectors fire in 0.29-0.82 of the ticks 1-10 m downflow of a
+source on its line (patchy the least; ``oslim bench model``), so a source is missed for 15 s in
+well under one check in a hundred, travel included; a false end, a plume swung aside, stays dry."""
 """A vehicle that moved less than this in a tick has stopped (an autopilot inside its acceptance radius)."""
 
 
@@ -62,14 +72,19 @@ within 2 m of a false end, which its upflow check then missed (docs/search-bench
 @dataclass
 class Check:
     """The upflow check of the cell where a rule fired (``found``): a cross-flow pass
-    ``check_upflow_m`` upflow of its centre that crosses the centre's line twice (``pattern``).
-    Odour ``cancel_upflow_m`` or more upflow of the centre, or another estimated cell, calls it
-    off. ``done``: the pass is flown, the cell is declared at the next tick."""
+    ``check_upflow_m`` upflow of its centre that crosses the centre's line twice (``pattern``),
+    then back to ``back``, on the line just downflow of the centre, until odour is met near the
+    centre again. Odour ``cancel_upflow_m`` or more upflow of the centre, or another estimated
+    cell, calls it off. ``flown``: the pass is flown (since ``flown_s``, the time of the tick that
+    first saw it flown); ``done``: odour came back, the cell is declared."""
 
     found: Declaration
     frame: FlowFrame
     cancel_upflow_m: float
     pattern: Pattern
+    back: Waypoint
+    flown: bool = False
+    flown_s: float | None = None
     done: bool = False
 
     @classmethod
@@ -84,7 +99,8 @@ class Check:
         """Legs ``check_width_m`` to each side across the flow, ``check_upflow_m`` upflow, the side
         nearer ``start`` (the vehicle) first, and back to the centre's line; or, when that point
         lies in an obstacle, just upflow of the obstacle: a plume that crosses the obstacle cannot
-        be met beside it, only beyond it.
+        be met beside it, only beyond it. Then back to the line ``check_upflow_m / 2`` downflow of
+        the centre (the centre itself when that point is outside the area or in an obstacle).
 
         The way back is a second crossing of the line: a sparse plume lies under a crossing vehicle
         for a few ticks only, and one crossing of a plume present in 40 % of the seconds misses it
@@ -101,7 +117,10 @@ class Check:
             low, high = sorted(frame.cross(end.x, end.y) for end in legs)
             line = min(max(frame.cross(ax, ay), low), high)
             legs = (*legs, frame.point(frame.along(legs[-1].x, legs[-1].y), line))
-        return cls(found, frame, 0.5 * upflow, Pattern(legs))
+        bx, by = found.x + 0.5 * upflow * frame.ux, found.y + 0.5 * upflow * frame.uy
+        if not grid.contains(bx, by) or grid.in_obstacle(bx, by):
+            bx, by = found.x, found.y
+        return cls(found, frame, 0.5 * upflow, Pattern(legs), Waypoint(bx, by))
 
     @property
     def cell(self) -> int:
@@ -117,12 +136,17 @@ class Check:
         return self.frame.along(self.found.x - obs.x, self.found.y - obs.y) >= self.cancel_upflow_m
 
     def waypoints(self, ctx: PlanContext, routing: Routing) -> tuple[Waypoint, ...]:
-        """The legs still to fly; once they are flown, hold where the vehicle is (``done``)."""
-        wanted = self.pattern.follow(ctx, routing)
-        if wanted is not None:
-            return wanted
-        self.done = True  # declared at the next tick
-        return (Waypoint(ctx.vehicle.x, ctx.vehicle.y),)
+        """The legs still to fly; once they are flown, ``back`` (``flown``), held there."""
+        if not self.flown:
+            wanted = self.pattern.follow(ctx, routing)
+            if wanted is not None:
+                return wanted
+            self.flown = True
+        return (self.back,)
+
+    def near(self, obs: Observation, radius_m: float) -> bool:
+        """Whether ``obs`` was made within ``radius_m`` of the cell's centre."""
+        return math.hypot(obs.x - self.found.x, obs.y - self.found.y) <= radius_m
 
 
 @dataclass
@@ -297,8 +321,9 @@ class EstimateProbe:
 
 @dataclass(frozen=True)
 class Pass:
-    """One check in the tally: the cell's centre (x, y), ``vote`` +1 flown clean or -1 called off
-    by odour upflow, and where that odour was (None: not known)."""
+    """One check in the tally: the cell's centre (x, y), ``vote`` +1 flown clean or -1 called off,
+    and where the odour upflow that called it off was (None: not known, or no odour at the cell
+    after the pass)."""
 
     x: float
     y: float
@@ -350,11 +375,31 @@ class Declaring:
         self._declarer.arm(time_s, likelihood)
 
     def recheck(self, obs: Observation, likelihood: FloatArray) -> None:
-        """Call the check off if this tick's odour or estimate says so."""
+        """Call the check off if this tick's odour or estimate says so; once its pass is flown, mark
+        it ``done`` at odour near the cell, or call it off after ``RESMELL_WAIT_S`` without any (a
+        call-off whose odour is unknown: it counts against the cell)."""
         check = self.check
-        if check is not None and not check.holds(obs, int(np.argmax(likelihood))):
+        if check is None:
+            return
+        estimate = int(np.argmax(likelihood))
+        if check.flown and estimate != check.cell:
+            # the misses on the way back move the greatest cell among the cell's neighbours
+            ex, ey = self.grid.centre(estimate)
+            if math.hypot(ex - check.found.x, ey - check.found.y) <= self.config.radius_m:
+                estimate = check.cell
+        if not check.holds(obs, estimate):
             if obs.detected and check.odour_upflow(obs):
                 self._passes.append(Pass(check.found.x, check.found.y, -1, (obs.x, obs.y)))
+            self.check = None
+            return
+        if not check.flown or check.done:
+            return
+        if check.flown_s is None:
+            check.flown_s = obs.time_s
+        if obs.detected and check.near(obs, self.config.radius_m):
+            check.done = True
+        elif obs.time_s - check.flown_s > RESMELL_WAIT_S:
+            self._passes.append(Pass(check.found.x, check.found.y, -1))
             self.check = None
 
     def reset(self) -> None:
@@ -373,7 +418,8 @@ class Declaring:
         flow = None if frame is None else (frame.ux, frame.uy)
         found = self._declarer.update(t, likelihood, (obs.x, obs.y), flow)
         if self.check is not None and self.check.done:
-            # flown with no odour upflow: the rule fired at the estimate when the check began
+            # flown with no odour upflow, and odour at the cell again: the rule fired at the
+            # estimate when the check began
             check, self.check = self.check, None
             if not self._vouched(check):
                 return None  # the rule has to fire anew for another pass
@@ -415,19 +461,21 @@ class Declaring:
     @property
     def passes(self) -> list[list[float]]:
         """Every check counted so far, for the restart snapshot: [x, y, 1] of a cell whose pass was
-        flown clean, [x, y, -1, odour x, odour y] of one called off by odour upflow."""
+        flown clean, [x, y, -1, odour x, odour y] of one called off by odour upflow, [x, y, -1] of
+        one called off because no odour came back to the cell."""
         return [p.row() for p in self._passes]
 
     def restore_passes(self, rows: list[list[float]]) -> None:
-        """Count ``rows`` (``passes``' form; a call-off without its odour, from a snapshot written
-        before the odour was kept, counts against every cell near it) as this mission's own;
+        """Count ``rows`` (``passes``' form; a call-off without its odour counts against every
+        cell near it) as this mission's own;
         ValueError for a vote that is not +1 or -1 or a point that is not finite."""
         self._passes = [Pass.of(row) for row in rows]
 
     def passes_near(self, x: float, y: float, frame: FlowFrame, cancel_upflow_m: float) -> int:
-        """Clean passes less passes called off by odour upflow of (x, y), of the checks within
-        ``radius_m`` of (x, y): odour at least ``cancel_upflow_m`` upflow of it along ``frame``
-        would have called off a check of (x, y) too."""
+        """Clean passes less passes called off near (x, y), of the checks within ``radius_m`` of
+        (x, y): a call-off by odour counts only if that odour lies at least ``cancel_upflow_m``
+        upflow of (x, y) along ``frame`` (it would have called off a check of (x, y) too); one with
+        no odour known always counts."""
         r = self.config.radius_m
         votes = 0
         for p in self._passes:

@@ -26,7 +26,7 @@ from service.core.mission import (
     PlumeLost,
     SourceDeclared,
 )
-from service.core.mission.declaring import PROBE_REACH
+from service.core.mission.declaring import PROBE_REACH, RESMELL_WAIT_S
 from service.core.observation import Observation
 from service.core.planning import PLANNERS
 from service.core.planning.base import VehicleState, Waypoint
@@ -612,14 +612,17 @@ def start_check() -> tuple[ScriptedMapper, Mission, Vehicle, MissionOutput]:
 def fly_dry_until_declared(
     mission: Mission, vehicle: Vehicle, out: MissionOutput, times: range
 ) -> tuple[MissionOutput, list[tuple[float, float]]]:
-    """Fly the waypoints one per tick with no odour until a declaration (or ``times`` run out);
-    returns the last output and the points visited."""
+    """Fly the waypoints one per tick with no odour but on the estimate's line 1.5 m downflow of
+    SOURCE's centre, where its check comes back to after its pass (a source's plume is there),
+    until a declaration (or ``times`` run out); returns the last output and the points visited."""
+    sx, sy = AREA.centre(SOURCE)
     visited = []
     for t in times:
         vehicle.follow(out.waypoints)
         vehicle.move()
         visited.append((vehicle.x, vehicle.y))
-        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, False), vehicle.state)
+        back = (vehicle.x, vehicle.y) == (sx + 1.5, sy)
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, back), vehicle.state)
         if out.state is MissionState.DECLARED:
             break
     return out, visited
@@ -634,8 +637,9 @@ def test_the_upflow_check_crosses_the_flow_upflow_of_the_estimate_before_declari
     out, visited = fly_dry_until_declared(mission, vehicle, out, range(1, 10))
     assert out.state is MissionState.DECLARED
     # flow East: 3 m West of the centre, 6 m to one side, then the other, then back to the
-    # estimate's line (a second crossing of it); declared there
-    assert visited == [(sx - 3.0, sy + 6.0), (sx - 3.0, sy - 6.0), (sx - 3.0, sy), (sx - 3.0, sy)]
+    # estimate's line (a second crossing of it), then 1.5 m downflow of the centre, where odour
+    # comes back: declared there
+    assert visited == [(sx - 3.0, sy + 6.0), (sx - 3.0, sy - 6.0), (sx - 3.0, sy), (sx + 1.5, sy)]
     (declared,) = out.events
     assert isinstance(declared, SourceDeclared)
     assert (declared.x, declared.y) == (sx, sy)
@@ -654,9 +658,26 @@ def test_odour_upflow_of_the_estimate_calls_the_check_off() -> None:
     # move), so a new check starts from here, and it must be flown whole before a declaration
     assert out.state is MissionState.TRACE
     assert out.events == ()
-    out, visited = fly_dry_until_declared(mission, vehicle, out, range(2, 12))
+    out, visited = fly_dry_until_declared(mission, vehicle, out, range(2, 20))
     assert out.state is MissionState.DECLARED
-    assert visited[-2:] == [(sx - 3.0, sy)] * 2  # back on the line at the new check's end, then declared
+    assert visited[-2:] == [(sx - 3.0, sy), (sx + 1.5, sy)]  # the new check's end, then odour at the cell
+
+
+def test_a_cell_whose_odour_does_not_come_back_after_the_check_is_not_declared() -> None:
+    # the end of a plume swung aside: the check's pass meets no odour upflow, and none comes back
+    # to the cell either, so the check is called off and counted against the cell
+    _, mission, vehicle, out = start_check()
+    sx, sy = AREA.centre(SOURCE)
+    for t in range(1, 4 + int(RESMELL_WAIT_S) + 2):
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, False), vehicle.state)
+        assert out.state is not MissionState.DECLARED
+        if mission.save_state()["check_passes"]:
+            break
+    assert (vehicle.x, vehicle.y) == (sx + 1.5, sy)  # it waited where the check came back to
+    assert mission.save_state()["check_passes"] == [[sx, sy, -1]]
+    assert t == 4 + int(RESMELL_WAIT_S) + 1  # the pass (3 ticks), then the wait
 
 
 def test_the_checks_tally_survives_a_restart() -> None:

@@ -8,7 +8,13 @@ from service.core.config import DeclarationConfig, PlanningConfig
 from service.core.grid import Grid
 from service.core.mapping.belief import FloatArray
 from service.core.mapping.hmm import HmmMapper
-from service.core.mission.declaring import PASS_PROBE_MARGIN_M, Check, Declaring, EstimateProbe
+from service.core.mission.declaring import (
+    PASS_PROBE_MARGIN_M,
+    RESMELL_WAIT_S,
+    Check,
+    Declaring,
+    EstimateProbe,
+)
 from service.core.mission.events import CrossCheck, SourceDeclared
 from service.core.mission.routing import Routing
 from service.core.observation import Observation
@@ -94,15 +100,25 @@ def test_odour_far_enough_upflow_or_another_estimate_calls_the_check_off() -> No
     assert not check.holds(odour(1.0, SX + 4.0, SY), SOURCE + 1)  # another estimate
 
 
-def test_the_check_is_done_when_its_legs_are_flown_and_holds_there() -> None:
+def test_once_its_legs_are_flown_the_check_goes_back_just_downflow_of_the_cell() -> None:
     check = Check.across(AREA, found_at_source(), EAST, CONFIG)
+    assert check.back == Waypoint(SX + 1.5, SY)  # as far downflow as odour that calls it off is upflow
     assert check.waypoints(ctx_at(SX, SY), ROUTING) == (Waypoint(SX - 3.0, SY + 6.0),)
-    assert not check.done
     assert check.waypoints(ctx_at(SX - 3.0, SY + 6.0), ROUTING) == (Waypoint(SX - 3.0, SY - 6.0),)
     assert check.waypoints(ctx_at(SX - 3.0, SY - 6.0), ROUTING) == (Waypoint(SX - 3.0, SY),)
+    assert not check.flown
+    assert check.waypoints(ctx_at(SX - 3.0, SY), ROUTING) == (Waypoint(SX + 1.5, SY),)
+    assert check.flown
     assert not check.done
-    assert check.waypoints(ctx_at(SX - 3.0, SY), ROUTING) == (Waypoint(SX - 3.0, SY),)
-    assert check.done
+    assert check.waypoints(ctx_at(SX + 1.5, SY), ROUTING) == (Waypoint(SX + 1.5, SY),)  # held there
+
+
+def test_the_way_back_stays_in_the_area() -> None:
+    edge = AREA.cell_of(97.0, 3.0)  # centre x = 97.5: 3 m downflow is outside the area
+    ex, ey = AREA.centre(edge)
+    found = Declaration(0.0, edge, AREA.paper_number(edge), ex, ey, 0.9, 0.9)
+    check = Check.across(AREA, found, EAST, CONFIG.model_copy(update={"check_upflow_m": 6.0}))
+    assert check.back == Waypoint(ex, ey)
 
 
 # -- the judgement ------------------------------------------------------------------------------
@@ -135,6 +151,48 @@ def test_a_rule_that_fires_starts_the_check_and_the_cell_is_declared_once_it_is_
     assert isinstance(verdict, SourceDeclared)
     assert verdict.check is CrossCheck.FLOWN
     assert (verdict.time_s, verdict.x, verdict.y, verdict.probability) == (2.0, SX, SY, 0.85)
+
+
+def flown(declaring: Declaring, t: float) -> Check:
+    """Fire the rule at the source and fly its check's legs with no odour (by tick ``t``)."""
+    check = declaring.judge(odour(t, SX, SY), peaked(), EAST)
+    assert isinstance(check, Check)
+    for x, y in ((SX - 3.0, SY + 6.0), (SX - 3.0, SY - 6.0), (SX - 3.0, SY)):
+        check.waypoints(ctx_at(x, y), ROUTING)
+    assert check.flown
+    return check
+
+
+def test_the_cell_is_declared_when_odour_comes_back_to_it_after_the_pass() -> None:
+    declaring = Declaring(AREA, CONFIG.model_copy(update={"radius_m": 6.0}), None)  # 5 m cells
+    declaring.arm(0.0, peaked())
+    check = flown(declaring, 0.0)
+    declaring.recheck(odour(1.0, SX - 1.0, SY, detected=False), peaked())
+    assert declaring.judge(odour(1.0, SX - 1.0, SY, detected=False), peaked(), EAST) is None
+    declaring.recheck(odour(2.0, SX + 7.0, SY), peaked())  # odour, but 7 m from the cell's centre
+    assert not check.done
+    # the misses on the way back move the greatest cell to a neighbour within radius_m: it goes on
+    declaring.recheck(odour(3.0, SX, SY, detected=False), peaked(SOURCE + 1))
+    assert declaring.check is check
+    declaring.recheck(odour(4.0, SX + 1.5, SY), peaked())
+    assert check.done
+    verdict = declaring.judge(odour(4.0, SX + 1.5, SY), peaked(), EAST)
+    assert isinstance(verdict, SourceDeclared)
+    assert verdict.check is CrossCheck.FLOWN
+
+
+def test_no_odour_back_at_the_cell_calls_the_check_off_and_counts_against_the_cell() -> None:
+    declaring = Declaring(AREA, CONFIG, None)
+    declaring.arm(0.0, peaked())
+    flown(declaring, 0.0)
+    declaring.recheck(odour(1.0, SX + 1.5, SY, detected=False), peaked())  # the wait starts
+    declaring.recheck(odour(1.0 + RESMELL_WAIT_S, SX + 1.5, SY, detected=False), peaked())
+    assert declaring.check is not None
+    declaring.recheck(odour(2.0 + RESMELL_WAIT_S, SX + 1.5, SY, detected=False), peaked())
+    assert declaring.check is None
+    assert declaring.passes == [[SX, SY, -1]]
+    assert declaring.passes_near(SX, SY, EAST, 1.5) == -1
+    assert declaring.passes_near(SX, SY, FlowFrame(-1.0, 0.0), 1.5) == -1  # whatever the flow
 
 
 def flown_clean(declaring: Declaring, t: float) -> SourceDeclared | Check | None:
