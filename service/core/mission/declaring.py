@@ -53,13 +53,13 @@ PASS_PROBE_MARGIN_M = 0.25
 PASS_PROBE_REACHED_M = 0.3
 """The upflow pass probe's point counts as reached this close to it."""
 STOPPED_M = 0.05
+"""A vehicle that moved less than this in a tick has stopped (an autopilot inside its acceptance radius)."""
 RESMELL_WAIT_S = 15.0
 """After its pass, a check waits this long for odour within ``radius_m`` of the cell, flying back
 to its line ``check_upflow_m / 2`` downflow of its centre (as far downflow as the odour that would
 call it off lies upflow). The suite's detectors fire in 0.29-0.82 of the ticks 1-10 m downflow of a
 source on its line (patchy the least; ``oslim bench model``), so a source is missed for 15 s in
 well under one check in a hundred, travel included; a false end, a plume swung aside, stays dry."""
-"""A vehicle that moved less than this in a tick has stopped (an autopilot inside its acceptance radius)."""
 
 
 PROBE_REACH = 3
@@ -117,10 +117,11 @@ class Check:
             low, high = sorted(frame.cross(end.x, end.y) for end in legs)
             line = min(max(frame.cross(ax, ay), low), high)
             legs = (*legs, frame.point(frame.along(legs[-1].x, legs[-1].y), line))
-        bx, by = found.x + 0.5 * upflow * frame.ux, found.y + 0.5 * upflow * frame.uy
+        cancel_upflow = 0.5 * upflow
+        bx, by = found.x + cancel_upflow * frame.ux, found.y + cancel_upflow * frame.uy
         if not grid.contains(bx, by) or grid.in_obstacle(bx, by):
             bx, by = found.x, found.y
-        return cls(found, frame, 0.5 * upflow, Pattern(legs), Waypoint(bx, by))
+        return cls(found, frame, cancel_upflow, Pattern(legs), Waypoint(bx, by))
 
     @property
     def cell(self) -> int:
@@ -144,9 +145,9 @@ class Check:
             self.flown = True
         return (self.back,)
 
-    def near(self, obs: Observation, radius_m: float) -> bool:
-        """Whether ``obs`` was made within ``radius_m`` of the cell's centre."""
-        return math.hypot(obs.x - self.found.x, obs.y - self.found.y) <= radius_m
+    def near(self, x: float, y: float, radius_m: float) -> bool:
+        """Whether (x, y) lies within ``radius_m`` of the cell's centre."""
+        return math.hypot(x - self.found.x, y - self.found.y) <= radius_m
 
 
 @dataclass
@@ -382,11 +383,9 @@ class Declaring:
         if check is None:
             return
         estimate = int(np.argmax(likelihood))
-        if check.flown and estimate != check.cell:
-            # the misses on the way back move the greatest cell among the cell's neighbours
-            ex, ey = self.grid.centre(estimate)
-            if math.hypot(ex - check.found.x, ey - check.found.y) <= self.config.radius_m:
-                estimate = check.cell
+        radius = self.config.radius_m
+        if check.flown and estimate != check.cell and check.near(*self.grid.centre(estimate), radius):
+            estimate = check.cell  # the misses on the way back move the greatest cell among its neighbours
         if not check.holds(obs, estimate):
             if obs.detected and check.odour_upflow(obs):
                 self._passes.append(Pass(check.found.x, check.found.y, -1, (obs.x, obs.y)))
@@ -396,7 +395,7 @@ class Declaring:
             return
         if check.flown_s is None:
             check.flown_s = obs.time_s
-        if obs.detected and check.near(obs, self.config.radius_m):
+        if obs.detected and check.near(obs.x, obs.y, radius):
             check.done = True
         elif obs.time_s - check.flown_s > RESMELL_WAIT_S:
             self._passes.append(Pass(check.found.x, check.found.y, -1))
