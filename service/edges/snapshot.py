@@ -2,7 +2,7 @@
 
 A companion computer gets rebooted and a service gets killed; the map it built must survive.
 After every tick that changed the map, the mapper's state (``SourceMapper.save_state``) and the
-mission's phase and its checks' tally (``Mission.save_state``) go to ``service.snapshot_path`` as
+mission's phase and detection memory (``Mission.save_state``) go to ``service.snapshot_path`` as
 one ``.npz`` file (no pickle: ``numpy.load(allow_pickle=False)`` reads it back). The file is
 written under a temporary name, fsynced and renamed over the old one (``os.replace`` is atomic on
 POSIX), so a SIGKILL or power cut leaves the previous snapshot or the new one, never half of one.

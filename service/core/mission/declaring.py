@@ -8,11 +8,10 @@ is flown and odour has been met at the cell again; odour found upflow of the est
 estimate, calls it off, and so does no odour at the cell for ``RESMELL_WAIT_S`` after the pass.
 A source keeps releasing, so a plume stays anchored at it: coming back to the cell after the pass
 meets its odour within seconds, while the end of a plume swung aside by a meander has usually
-moved on by then (docs/search-benchmark.md, step 37). Near a cell whose
-pass was called off by odour upflow of it, the clean passes must outnumber the called-off ones: a
-patchy plume is missed on a pass now and then, and a rule that fires again after each call-off
-would otherwise end in the pass that missed. A call-off counts against the cells its odour lies
-upflow of, not against one upflow of that odour, which it does not contradict. A plume that
+moved on by then (docs/search-benchmark.md, step 37). A call-off is not remembered: a pass that
+happens to miss a patchy plume upflow of a false end still needs odour back at the false end,
+which a plume swung aside does not give (a tally that asked a cell with a call-off for more clean
+passes than called-off ones gained nothing once the odour back was asked for: step 39). A plume that
 swung off the vehicle's line looks to the maps like the upflow end of a plume; the check looks
 for it where it would be. Steady odour near the estimate does not make the check needless: a
 strong plume is smelt as steadily far downflow of its source. At the estimate the vehicle probes
@@ -320,35 +319,6 @@ class EstimateProbe:
         return Pattern(pass_across(grid, *point, frame, self.across_m))
 
 
-@dataclass(frozen=True)
-class Pass:
-    """One check in the tally: the cell's centre (x, y), ``vote`` +1 flown clean or -1 called off,
-    and where the odour upflow that called it off was (None: not known, or no odour at the cell
-    after the pass)."""
-
-    x: float
-    y: float
-    vote: int
-    odour: tuple[float, float] | None = None
-
-    def row(self) -> list[float]:
-        return [self.x, self.y, self.vote, *(self.odour or ())]
-
-    @classmethod
-    def of(cls, row: list[float]) -> Pass:
-        """The pass of a snapshot row (``row``'s form); ValueError for one malformed."""
-        values = [float(v) for v in row]
-        if (
-            len(values) not in (3, 5)
-            or not all(math.isfinite(v) for v in values)
-            or values[2] not in (1.0, -1.0)
-        ):
-            raise ValueError("malformed check tally")
-        x, y, vote = values[:3]
-        odour = (values[3], values[4]) if len(values) == 5 and vote < 0 else None
-        return cls(x, y, int(vote), odour)
-
-
 class Declaring:
     """Judges each tick whether the source may be declared: the rule (``Declarer``, armed at the
     first detection), then the check across the flow that vouches for the cell. Owns the check and
@@ -359,7 +329,6 @@ class Declaring:
     def __init__(self, grid: Grid, config: DeclarationConfig, admit: Callable[[int], bool] | None) -> None:
         self.grid = grid
         self.config = config
-        self._passes: list[Pass] = []
         self._declarer = Declarer(grid, config, admit)
         self.check: Check | None = None  # the upflow check of a cell about to be declared
         reach_m = PROBE_REACH * math.hypot(grid.cell_width_m, grid.cell_height_m)
@@ -377,8 +346,7 @@ class Declaring:
 
     def recheck(self, obs: Observation, likelihood: FloatArray) -> None:
         """Call the check off if this tick's odour or estimate says so; once its pass is flown, mark
-        it ``done`` at odour near the cell, or call it off after ``RESMELL_WAIT_S`` without any (a
-        call-off whose odour is unknown: it counts against the cell)."""
+        it ``done`` at odour near the cell, or call it off after ``RESMELL_WAIT_S`` without any."""
         check = self.check
         if check is None:
             return
@@ -387,8 +355,6 @@ class Declaring:
         if check.flown and estimate != check.cell and check.near(*self.grid.centre(estimate), radius):
             estimate = check.cell  # the misses on the way back move the greatest cell among its neighbours
         if not check.holds(obs, estimate):
-            if obs.detected and check.odour_upflow(obs):
-                self._passes.append(Pass(check.found.x, check.found.y, -1, (obs.x, obs.y)))
             self.check = None
             return
         if not check.flown or check.done:
@@ -398,7 +364,6 @@ class Declaring:
         if obs.detected and check.near(obs.x, obs.y, radius):
             check.done = True
         elif obs.time_s - check.flown_s > RESMELL_WAIT_S:
-            self._passes.append(Pass(check.found.x, check.found.y, -1))
             self.check = None
 
     def reset(self) -> None:
@@ -420,8 +385,6 @@ class Declaring:
             # flown with no odour upflow, and odour at the cell again: the rule fired at the
             # estimate when the check began
             check, self.check = self.check, None
-            if not self._vouched(check):
-                return None  # the rule has to fire anew for another pass
             cell = check.cell
             flown = replace(
                 check.found,
@@ -445,44 +408,6 @@ class Declaring:
         if self.probe.stopped_short:
             self._declarer.accept_pass()
         return waypoints
-
-    def _vouched(self, check: Check) -> bool:
-        """Whether ``check``, just flown clean, vouches for its cell: with it, the clean passes of
-        checks within ``radius_m`` of the cell outnumber those called off there by odour upflow.
-        Each pass is one draw of a patchy plume; counting only the last one would let a run of
-        call-offs end in the one pass that happened to miss. A pass not enough yet is counted."""
-        x, y = check.found.x, check.found.y
-        if self.passes_near(x, y, check.frame, check.cancel_upflow_m) + 1 >= 1:
-            return True
-        self._passes.append(Pass(x, y, 1))
-        return False
-
-    @property
-    def passes(self) -> list[list[float]]:
-        """Every check counted so far, for the restart snapshot: [x, y, 1] of a cell whose pass was
-        flown clean, [x, y, -1, odour x, odour y] of one called off by odour upflow, [x, y, -1] of
-        one called off because no odour came back to the cell."""
-        return [p.row() for p in self._passes]
-
-    def restore_passes(self, rows: list[list[float]]) -> None:
-        """Count ``rows`` (``passes``' form; a call-off without its odour counts against every
-        cell near it) as this mission's own;
-        ValueError for a vote that is not +1 or -1 or a point that is not finite."""
-        self._passes = [Pass.of(row) for row in rows]
-
-    def passes_near(self, x: float, y: float, frame: FlowFrame, cancel_upflow_m: float) -> int:
-        """Clean passes less passes called off near (x, y), of the checks within ``radius_m`` of
-        (x, y): a call-off by odour counts only if that odour lies at least ``cancel_upflow_m``
-        upflow of (x, y) along ``frame`` (it would have called off a check of (x, y) too); one with
-        no odour known always counts."""
-        r = self.config.radius_m
-        votes = 0
-        for p in self._passes:
-            if math.hypot(p.x - x, p.y - y) > r:
-                continue
-            against = p.odour is None or frame.along(x - p.odour[0], y - p.odour[1]) >= cancel_upflow_m
-            votes += 1 if p.vote > 0 else -1 if against else 0
-        return votes
 
     def _vouch(
         self, found: Declaration, frame: FlowFrame | None, vehicle: tuple[float, float]

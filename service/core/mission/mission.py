@@ -112,8 +112,8 @@ class Mission:
         return self._declaring.check is not None
 
     def save_state(self) -> dict[str, Any]:
-        """The phase, detection memory and the checks' tally (for the restart snapshot, as JSON; the
-        mapper saves its own)."""
+        """The phase and detection memory (for the restart snapshot, as JSON; the mapper saves its
+        own)."""
         detection = self._last_detection
         return {
             "phase": str(self._state),
@@ -121,19 +121,17 @@ class Mission:
             "last_detection_t": None if detection is None else detection[0],
             "last_detection_x": None if detection is None else detection[1],
             "last_detection_y": None if detection is None else detection[2],
-            "check_passes": self._declaring.passes,
         }
 
     def restore_state(self, state: dict[str, Any]) -> None:
         """Continue in the phase ``save_state`` saved; a leg is laid out anew,
-        and past the first detection the declaration rule is re-armed from the restored map. The
-        checks' tally goes on, so a cell whose pass met odour upflow still needs its clean passes
-        (a snapshot from before the tally was saved has none)."""
+        and past the first detection the declaration rule is re-armed from the restored map. A
+        snapshot's ``check_passes`` (the checks' tally, before step 39 of docs/search-benchmark.md)
+        is ignored."""
         phase = MissionState(state["phase"])
         self._last_time = None if state["last_time"] is None else float(state["last_time"])
         t = state["last_detection_t"]
         x, y = state["last_detection_x"], state["last_detection_y"]
-        self._declaring.restore_passes(state.get("check_passes", []))
         self._last_detection = None if t is None else (float(t), float(x), float(y))
         self._state = phase
         if phase is not MissionState.FIND and self._last_time is not None:
