@@ -64,7 +64,9 @@ class Declaration:
     and ``radius_m`` is that radius plus half a model cell's diagonal, so that every point of those
     cells is inside it. ``oslim bench suite`` measures how often the statement is true. ``cell``:
     the papers' 1-based number of the area's cell that holds (x, y); ``time_s``: when it was
-    declared.
+    declared. ``check``: how the cell was vouched for (``CrossCheck``): ``flown``, the check across
+    the flow; ``off``, none configured; ``endurance``, named when ``vehicle.endurance_s`` ran out,
+    on the map's mass alone.
     """
 
     time_s: float
@@ -73,6 +75,7 @@ class Declaration:
     confidence: float
     radius_m: float
     cell: int
+    check: str = "flown"
 
 
 @dataclass(frozen=True)
@@ -290,7 +293,7 @@ class Search:
         radius_m = self.config.declaration.radius_m + 0.5 * math.hypot(
             self.model_grid.cell_width_m, self.model_grid.cell_height_m
         )
-        return Declaration(event.time_s, event.x, event.y, event.mass, radius_m, event.cell)
+        return Declaration(event.time_s, event.x, event.y, event.mass, radius_m, event.cell, str(event.check))
 
 
 def _check_finite(what: str, *values: float) -> None:

@@ -25,6 +25,11 @@ class _Section(BaseModel):
 
 class VehicleConfig(_Section):
     id: str = Field(default="oslim-1", min_length=1, pattern=r"^[A-Za-z0-9_\-]+$")
+    endurance_s: float = Field(default=0.0, ge=0)
+    """How long the vehicle can search, counted from the service's first tick, s (0: not known).
+    In the last tick within it the service names the map's estimate as
+    ``declaration.final_probability`` says, stating the map's mass within ``declaration.radius_m``
+    of it as its confidence (``oslim bench suite`` passes each world's time limit)."""
 
 
 class MavlinkConfig(_Section):
@@ -161,6 +166,11 @@ class DeclarationConfig(_Section):
     off."""
     check_upflow_m: float = Field(default=3.0, gt=0)
     """How far upflow of the estimated cell's centre the check crosses the flow, m."""
+    final_probability: float = Field(default=0.8, gt=0, le=1)
+    """When the vehicle's endurance (``vehicle.endurance_s``) runs out before a declaration, the
+    estimate is named without the check across the flow if at least this much of the map lies
+    within ``radius_m`` of it, the upflow pass (``upflow_pass_m`` > 0) has been made since it became
+    the estimate, and no odour has been met ``check_upflow_m / 2`` or more upflow of it since."""
 
     def for_mapper(self, mapper: str) -> DeclarationConfig:
         """This configuration as it applies to the mapper named ``mapper``: ``hmm_probability``,

@@ -33,7 +33,7 @@ from service.core.mission.events import CrossCheck, SourceDeclared
 from service.core.mission.pattern import ARRIVAL_M, Pattern
 from service.core.planning.base import Waypoint
 from service.core.planning.crossflow import pass_across, upflow_until
-from service.core.planning.declaration import Declarer, mass_within
+from service.core.planning.declaration import Declaration, Declarer, mass_within
 from service.core.planning.probe import information
 from service.core.planning.safety import segment_clear
 
@@ -45,7 +45,6 @@ if TYPE_CHECKING:
     from service.core.observation import Observation
     from service.core.planning.base import BoolArray, PlanContext
     from service.core.planning.crossflow import FlowFrame
-    from service.core.planning.declaration import Declaration
 
 PASS_PROBE_MARGIN_M = 0.25
 """The probe to the upflow pass flies this far beyond the upflow pass, so that the pass is met, not grazed."""
@@ -335,6 +334,7 @@ class Declaring:
         self.probe = EstimateProbe(
             grid, config.upflow_pass_m, min(config.visit_radius_m, reach_m), config.check_width_m
         )
+        self._odour_upflow: tuple[int, bool] | None = None  # (estimated cell, odour met upflow of it since)
 
     @property
     def armed(self) -> bool:
@@ -366,6 +366,36 @@ class Declaring:
         elif obs.time_s - check.flown_s > RESMELL_WAIT_S:
             self.check = None
 
+    def final(self, time_s: float, likelihood: FloatArray) -> SourceDeclared | None:
+        """The declaration when the vehicle's endurance runs out: the estimate, named on the map's
+        mass without the check across the flow, if the rule's upflow pass has been made since it
+        became the estimate (``upflow_pass_m``; none configured, none named), no odour has been met
+        ``check_upflow_m / 2`` or more upflow of it since (what calls a check off), and
+        ``final_probability`` of the map lies within ``radius_m`` of it (its stated confidence).
+        None otherwise (docs/search-benchmark.md, step 40)."""
+        cell = int(np.argmax(likelihood))
+        if not (self._declarer.armed and self._declarer.passed_upflow):
+            return None
+        if self._odour_upflow != (cell, False):
+            return None
+        mass = mass_within(self.grid, likelihood, cell, self.config.radius_m)
+        if mass < self.config.final_probability or not self._declarer.admits(cell):
+            return None
+        x, y = self.grid.centre(cell)
+        found = Declaration(time_s, cell, self.grid.paper_number(cell), x, y, float(likelihood.flat[cell]), mass)
+        return self._declared(time_s, found, CrossCheck.ENDURANCE)
+
+    def _note_odour(self, obs: Observation, cell: int, frame: FlowFrame | None) -> None:
+        """Whether odour has been met upflow of ``cell``, the estimate, since it became the
+        estimate: ``check_upflow_m / 2`` or more along the mean flow, within ``visit_radius_m``
+        across it."""
+        seen = self._odour_upflow[1] if self._odour_upflow is not None and self._odour_upflow[0] == cell else False
+        if obs.detected and frame is not None:
+            cx, cy = self.grid.centre(cell)
+            upflow = frame.along(cx - obs.x, cy - obs.y) >= 0.5 * self.config.check_upflow_m
+            seen = seen or (upflow and abs(frame.cross(cx - obs.x, cy - obs.y)) <= self.config.visit_radius_m)
+        self._odour_upflow = (cell, seen)
+
     def reset(self) -> None:
         """A new mission state: no check, no probe detour (a pass probe stays while it applies)."""
         self.check = None
@@ -381,6 +411,7 @@ class Declaring:
         t = obs.time_s
         flow = None if frame is None else (frame.ux, frame.uy)
         found = self._declarer.update(t, likelihood, (obs.x, obs.y), flow)
+        self._note_odour(obs, int(np.argmax(likelihood)), frame)
         if self.check is not None and self.check.done:
             # flown with no odour upflow, and odour at the cell again: the rule fired at the
             # estimate when the check began

@@ -46,6 +46,7 @@ class CrossCheck(StrEnum):
 
     FLOWN = "flown"  # flown, no odour upflow
     OFF = "off"  # no check configured (or no flow direction yet)
+    ENDURANCE = "endurance"  # not checked: the vehicle's endurance ran out (``declaration.final_probability``)
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,8 @@ tracing, and source declaration". The states, and the behaviour that flies each:
   detector's, or a stray puff) is not worth a trace.
 - ``DECLARED``: a declaration rule fired and its cell was vouched for (``Declaring``); the
   vehicle holds. Rules are only judged after the first detection: before it a flat map's argmax
-  never moves.
+  never moves. With an endurance (``vehicle.endurance_s``), its last tick names the estimate
+  without the check when the map is sure enough of it (``Declaring.final``).
 
 The transitions are ``transitions.TRANSITIONS``. A check across the flow is flown in ``TRACE``
 wherever the rule fired (``Cue.CHECK``).
@@ -76,8 +77,12 @@ class Mission:
         *,
         planner: Planner | None = None,
         admit: Callable[[int], bool] | None = None,
+        endurance_s: float = 0.0,
+        tick_s: float = 1.0,
     ) -> None:
-        """``admit``: the declarer's filter of the cells it may name (``Declarer``; benchmarks only)."""
+        """``admit``: the declarer's filter of the cells it may name (``Declarer``; benchmarks only).
+        ``endurance_s`` (0: none): how long the vehicle can search from the start of the first
+        tick, which is ``tick_s`` before its observation."""
         if mapper.grid != grid:
             raise ValueError("the mapper works on a different grid")
         self.grid = grid
@@ -94,12 +99,23 @@ class Mission:
         self._last_detection: tuple[float, float, float] | None = None  # (t, x, y)
         self._contact_hits: int | None = None  # detections since a contact in FIND
         self._frame: FlowFrame | None = None  # the mean flow's direction
+        self._endurance_s = endurance_s
+        self._tick_s = tick_s
+        self._started_s: float | None = None  # the start of the first tick
 
     @classmethod
     def from_config(
         cls, config: Config, grid: Grid, mapper: SourceMapper, *, admit: Callable[[int], bool] | None = None
     ) -> Mission:
-        return cls(grid, mapper, config.planning, config.declaration, admit=admit)
+        return cls(
+            grid,
+            mapper,
+            config.planning,
+            config.declaration,
+            admit=admit,
+            endurance_s=config.vehicle.endurance_s,
+            tick_s=config.mapping.tick_s,
+        )
 
     @property
     def state(self) -> MissionState:
@@ -121,14 +137,18 @@ class Mission:
             "last_detection_t": None if detection is None else detection[0],
             "last_detection_x": None if detection is None else detection[1],
             "last_detection_y": None if detection is None else detection[2],
+            "started_s": self._started_s,
         }
 
     def restore_state(self, state: dict[str, Any]) -> None:
         """Continue in the phase ``save_state`` saved; a leg is laid out anew,
         and past the first detection the declaration rule is re-armed from the restored map. A
         snapshot's ``check_passes`` (the checks' tally, before step 39 of docs/search-benchmark.md)
-        is ignored."""
+        is ignored; one without ``started_s`` counts the endurance from the next tick. The cells
+        visited near are not saved: after a restart the endurance names only cells visited since."""
         phase = MissionState(state["phase"])
+        started = state.get("started_s")
+        self._started_s = None if started is None else float(started)
         self._last_time = None if state["last_time"] is None else float(state["last_time"])
         t = state["last_detection_t"]
         x, y = state["last_detection_x"], state["last_detection_y"]
@@ -144,6 +164,8 @@ class Mission:
             held = self._emitter.holding
             return MissionOutput(obs.time_s, self._state, None, (), self.mapper.estimate(), held)
         self._last_time = obs.time_s
+        if self._started_s is None:
+            self._started_s = obs.time_s - self._tick_s
         self.mapper.update(obs)
         self._update_mean_flow(obs)
         estimate = self.mapper.estimate()
@@ -194,6 +216,8 @@ class Mission:
             events.append(PlumeLost(t, x_last, y_last, t_last))
             self._go(cue)
         verdict = self._declaring.judge(obs, self.mapper.likelihood, self._frame)
+        if self._out_of_time(t) and not isinstance(verdict, SourceDeclared):
+            verdict = self._declaring.final(t, self.mapper.likelihood) or verdict
         if isinstance(verdict, Check):
             if self._state is not MissionState.TRACE:
                 self._go(Cue.CHECK)
@@ -201,6 +225,13 @@ class Mission:
             events.append(verdict)
             self._go(Cue.SOURCE)
         return events
+
+    def _out_of_time(self, t: float) -> bool:
+        """Whether the tick after the one at ``t`` would end beyond the vehicle's endurance (the
+        service may go on past it until the pilot takes over: each later tick is asked too)."""
+        if self._endurance_s <= 0.0 or self._started_s is None:
+            return False
+        return t + self._tick_s > self._started_s + self._endurance_s + 1e-9
 
     def _quiet(self, t: float) -> Cue | None:
         """Whether tracing has gone without odour long enough to be lost: ``LONE_QUIET`` after a

@@ -131,7 +131,7 @@ class Declarer:
         mass = mass_within(self.grid, likelihood, cell, self.config.radius_m)
         if mass < self.config.probability:
             return None
-        if self._admit is not None and not self._admit(cell):
+        if not self.admits(cell):
             return None
         x, y = self.grid.centre(cell)
         return Declaration(
@@ -143,6 +143,10 @@ class Declarer:
             probability=float(likelihood.flat[cell]),
             mass=mass,
         )
+
+    def admits(self, cell: int) -> bool:
+        """Whether ``admit`` (if any) lets ``cell`` be named."""
+        return self._admit is None or self._admit(cell)
 
     def _is_upflow(
         self, cell: int, vehicle_m: tuple[float, float] | None, flow: tuple[float, float] | None

@@ -55,6 +55,7 @@ def mission_row(name: str, result: MissionResult, limit_s: float) -> dict[str, A
         "error_m": result.error_m,
         "path_m": result.path_m,
         "vehicle_speed_mps": result.vehicle_speed_mps,
+        "check": result.check,
     }
 
 

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from service.api import Declaration, Search, Step
-from service.core.config import MappingMethod, PlanningMethod
+from service.core.config import Config, MappingMethod, PlanningMethod
 from service.core.errors import ConfigError
 from service.core.grid import Grid
 from service.core.mapping.belief import FloatArray
@@ -111,6 +111,9 @@ class MissionResult:
     radius_m: float | None = None
     vehicle_speed_mps: float | None = None
     """The simulated vehicle's cruise speed (the suite's time limits shrink with it)."""
+    check: str | None = None
+    """How the declared cell was vouched for (``Declaration.check``): ``endurance`` when it was
+    named as the time ran out, on the map's mass alone."""
     trace: MissionTrace | None = field(default=None, compare=False)
 
     @property
@@ -174,6 +177,14 @@ def within_one_cell(grid: Grid, x: float, y: float, source_x: float, source_y: f
     return abs(row_a - row_b) <= 1 and abs(col_a - col_b) <= 1
 
 
+def with_endurance(config: Config, max_time_s: float) -> Config:
+    """``config`` with the vehicle's endurance at ``max_time_s``, the mission's time limit (or at
+    the configured endurance, when that is shorter)."""
+    configured = config.vehicle.endurance_s
+    endurance = max_time_s if configured <= 0.0 else min(configured, max_time_s)
+    return config.model_copy(update={"vehicle": config.vehicle.model_copy(update={"endurance_s": endurance})})
+
+
 def run_mission(
     scenario: Scenario,
     seed: int,
@@ -189,7 +200,7 @@ def run_mission(
     With ``oracle`` the declaration has a perfect guard: a rule that fires for a cell more than one
     cell from the true source is ignored. No vehicle has one; it bounds what any guard against
     wrong declarations (``declaration.upflow_pass_m``, ``check_width_m``) can gain."""
-    config, grid = scenario.config, scenario.grid
+    config, grid = with_endurance(scenario.config, max_time_s), scenario.grid
     world = build_world(scenario, seed)
     source = place(scenario, seed).source_m
 
@@ -284,6 +295,7 @@ def run_mission(
         confidence=declaration.confidence,
         radius_m=declaration.radius_m,
         vehicle_speed_mps=speed,
+        check=declaration.check,
         trace=trace,
     )
 

@@ -25,6 +25,7 @@ import numpy as np
 from scipy.stats import binomtest
 
 from service.core.config import Config, load_config, parse_override
+from service.core.mission import CrossCheck
 from service.tools.bench.search import FailureClass, MissionResult, run_mission
 from service.tools.bench.workers import in_order
 from sim_bridge.generator import (
@@ -267,6 +268,34 @@ class Calibration:
         )
 
 
+@dataclass(frozen=True)
+class Endurance:
+    """The declarations named as a mission's time ran out (``vehicle.endurance_s``, which the suite
+    sets to each world's limit), on the map's mass alone: how many, and how many were correct. The
+    rest of the suite's successes are what the search makes without them."""
+
+    declarations: int = 0
+    correct: int = 0
+
+    @classmethod
+    def of(cls, results: Sequence[MissionResult]) -> Endurance:
+        named = [r for r in results if r.check == CrossCheck.ENDURANCE]
+        return cls(len(named), sum(r.correct for r in named))
+
+    def __add__(self, other: Endurance) -> Endurance:
+        return Endurance(self.declarations + other.declarations, self.correct + other.correct)
+
+    def line(self) -> str:
+        wrong = self.declarations - self.correct
+        return (
+            f"named as the time ran out (vehicle.endurance_s, without the check): {self.declarations} "
+            f"declarations, {self.correct} correct, {wrong} wrong"
+        )
+
+    def as_row(self) -> dict[str, Any]:
+        return {"endurance_declarations": self.declarations, "endurance_correct": self.correct}
+
+
 SPEED_BANDS = (0.0, 1.0, 1.5)
 """Lower edges of the vehicle-speed bands (m/s) the summary splits success by: the time limits
 shrink with the speed, the map's learning does not speed up with it (one observation a second)."""
@@ -341,6 +370,7 @@ class ClassSummary:
     speeds: Speeds = field(default_factory=Speeds)
     speed_drawn: bool = True
     """Whether the class draws its vehicles' speed (the suite's split by speed counts only those)."""
+    endurance: Endurance = field(default_factory=lambda: Endurance())
     outcomes: tuple[tuple[MissionResult, float], ...] = field(default=(), repr=False, compare=False)
     """Each mission and its time limit, in seed order (``oslim bench suite --missions``)."""
 
@@ -376,6 +406,7 @@ class ClassSummary:
             "declarations": self.calibration.declarations,
             "within_stated_radius": self.calibration.within,
             "speed_bands": [band.as_row() for band in self.speeds.bands],
+            **self.endurance.as_row(),
         }
 
 
@@ -400,6 +431,7 @@ def summarise_class(
         calibration=Calibration.of(results),
         speeds=Speeds.of(results),
         speed_drawn=speed_drawn,
+        endurance=Endurance.of(results),
         outcomes=tuple(outcomes),
     )
 
@@ -421,12 +453,15 @@ class SuiteSummary:
     """Success by the vehicle's speed over the classes that draw it (a class flown at one speed
     would weigh its own difficulty into one band)."""
     speed_classes: int = 0
+    endurance: Endurance = field(default_factory=lambda: Endurance())
 
     def line(self) -> str:
         return (
             self.calibration.table()
             + "\n"
             + self.calibration.line()
+            + "\n"
+            + self.endurance.line()
             + "\n"
             + f"{self.speeds.line()} (classes that draw the speed: {self.speed_classes})"
             + "\n"
@@ -454,6 +489,7 @@ class SuiteSummary:
         row["calibration_bands"] = [band.as_row() for band in c.bands]
         row["speed_bands"] = [band.as_row() for band in self.speeds.bands]
         row["speed_classes"] = self.speed_classes
+        row.update(self.endurance.as_row())
         return row
 
 
@@ -474,6 +510,7 @@ def summarise_suite(classes: Sequence[ClassSummary], elapsed_s: float) -> SuiteS
         calibration=sum((c.calibration for c in classes), Calibration()),
         speeds=sum((c.speeds for c in classes if c.speed_drawn), Speeds()),
         speed_classes=sum(c.speed_drawn for c in classes),
+        endurance=sum((c.endurance for c in classes), Endurance()),
     )
 
 

@@ -702,6 +702,95 @@ def test_a_snapshot_with_the_old_checks_tally_is_restored_without_it() -> None:
     assert dry_ticks_to_declare(old) == dry_ticks_to_declare(state)
 
 
+def endurance_mission(mapper: SourceMapper, endurance_s: float) -> Mission:
+    """A mission with a 2 m upflow pass, a 6 m check 3 m upflow, the rule at 0.8, and
+    ``endurance_s`` of endurance."""
+    planning = PAPERS_PLANNING.model_copy(update={"lost_after_s": 10.0})
+    decl = PAPERS_DECLARATION.model_copy(
+        update={"probability": 0.8, "upflow_pass_m": 2.0, "check_width_m": 6.0, "check_upflow_m": 3.0}
+    )
+    return Mission(AREA, mapper, planning, decl, endurance_s=endurance_s, tick_s=1.0)
+
+
+def fly_until(
+    mission: Mission, vehicle: Vehicle, times: range, odour: Callable[[int, Vehicle], bool] = lambda t, v: False
+) -> list[MissionOutput]:
+    """From SOURCE's centre with odour at t = 0, fly the waypoints one per tick (``odour`` says
+    when a tick smells); the outputs of each tick from t = 0."""
+    sx, sy = AREA.centre(SOURCE)
+    out = mission.step(Observation(0.0, sx, sy, 1.0, 0.0, True), vehicle.state)
+    outs = [out]
+    for t in times:
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, odour(t, vehicle)), vehicle.state)
+        outs.append(out)
+    return outs
+
+
+def test_the_last_tick_of_the_endurance_names_an_estimate_the_map_is_sure_of() -> None:
+    # the upflow pass is made (t = 1) and the rule's check flown, but no odour comes back before
+    # the endurance runs out: it began a tick before the first one (t = -1), so the tick at 7 is
+    # the last to end within 8 s, and names the estimate on the map's mass alone
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.9)
+    mission = endurance_mission(mapper, endurance_s=8.0)
+    sx, sy = AREA.centre(SOURCE)
+    outs = fly_until(mission, Vehicle(sx, sy), range(1, 8))
+    assert mission.save_state()["started_s"] == -1.0
+    assert all(o.state is not MissionState.DECLARED for o in outs[:-1])
+    assert outs[-1].state is MissionState.DECLARED
+    (declared,) = outs[-1].events
+    assert isinstance(declared, SourceDeclared)
+    assert declared.check is CrossCheck.ENDURANCE
+    assert (declared.time_s, declared.x, declared.y) == (7.0, sx, sy)
+    assert declared.mass == pytest.approx(0.9)  # within 3 m of its centre on 5 m cells: the cell alone
+
+
+def test_the_endurance_names_nothing_unsure_unpassed_or_with_odour_upflow() -> None:
+    sx, sy = AREA.centre(SOURCE)
+    # unsure: 0.5 of the map at the estimate, below declaration.final_probability (0.8)
+    unsure = ScriptedMapper(AREA)
+    unsure.peak_at(SOURCE, 0.5)
+    outs = fly_until(endurance_mission(unsure, endurance_s=8.0), Vehicle(sx, sy), range(1, 12))
+    assert all(o.state is not MissionState.DECLARED for o in outs)
+    # odour 3 m upflow of the estimate (the check's first leg) since it became the estimate
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.9)
+    mission = endurance_mission(mapper, endurance_s=8.0)
+    outs = fly_until(mission, Vehicle(sx, sy), range(1, 12), odour=lambda t, v: v.x <= sx - 2.0 and abs(v.y - sy) < 1)
+    assert all(o.state is not MissionState.DECLARED for o in outs)
+    # the upflow pass not made: the map is sure of a cell the vehicle never went upflow of
+    far = AREA.cell_of(80.0, -40.0)
+    sure = ScriptedMapper(AREA)
+    sure.peak_at(far, 0.95)
+    mission = endurance_mission(sure, endurance_s=3.0)
+    for t in range(6):
+        out = mission.step(Observation(float(t), sx, sy, 1.0, 0.0, t == 0), VehicleState(sx, sy))
+        assert out.state is not MissionState.DECLARED
+    # and without an endurance the sure map of the first test waits for its check
+    mission = endurance_mission(mapper, endurance_s=0.0)
+    assert all(o.state is not MissionState.DECLARED for o in fly_until(mission, Vehicle(sx, sy), range(1, 12)))
+
+
+def test_the_endurance_is_counted_from_the_first_tick_across_a_restart() -> None:
+    mapper = ScriptedMapper(AREA)
+    mapper.peak_at(SOURCE, 0.9)
+    sx, sy = AREA.centre(SOURCE)
+    mission = endurance_mission(mapper, endurance_s=8.0)
+    vehicle = Vehicle(sx, sy)
+    outs = fly_until(mission, vehicle, range(1, 4))
+    saved = json.loads(json.dumps(mission.save_state()))
+    restarted = endurance_mission(mapper, endurance_s=8.0)
+    restarted.restore_state(saved)
+    out = outs[-1]
+    for t in range(4, 8):
+        vehicle.follow(out.waypoints)
+        vehicle.move()
+        out = restarted.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, False), vehicle.state)
+        assert (out.state is MissionState.DECLARED) == (t == 7)
+
+
 @pytest.mark.parametrize("back_to", [MissionState.FIND, MissionState.LOST])
 def test_a_check_that_starts_outside_trace_is_flown_in_trace(back_to: MissionState) -> None:
     # the rule fires while the mission looks for the plume again after a lone contact (FIND) or

@@ -1,6 +1,8 @@
 """The declaration's mission side: the check across the flow (its legs and its call-off rule),
 the judgement that starts it and declares after it, and the probe at the estimate."""
 
+from collections.abc import Callable
+
 import numpy as np
 
 from service.core.config import DeclarationConfig, PlanningConfig
@@ -305,3 +307,33 @@ def test_the_pass_probe_flies_just_beyond_the_upflow_pass_until_it_is_made() -> 
 def test_no_probe_without_a_flow() -> None:
     probe = new_probe(upflow_pass_m=2.0)
     assert probe.waypoints(ctx_at(SX, SY), ROUTING, None, passed_upflow=False) is None
+
+
+def test_the_endurance_s_declaration_needs_the_upflow_pass_no_odour_upflow_and_the_mass() -> None:
+    config = CONFIG.model_copy(update={"upflow_pass_m": 2.0})
+
+    def passed(admit: Callable[[int], bool] | None = None, pi: FloatArray | None = None) -> Declaring:
+        """Armed at the source by odour there, then the upflow pass made 2 m upflow of it, dry."""
+        declaring = Declaring(AREA, config, admit)
+        pi = peaked() if pi is None else pi
+        declaring.arm(0.0, pi)
+        declaring.judge(odour(0.0, SX, SY), pi, EAST)
+        declaring.judge(odour(1.0, SX - 2.0, SY, detected=False), pi, EAST)
+        return declaring
+
+    unpassed = Declaring(AREA, config, None)
+    unpassed.arm(0.0, peaked())
+    unpassed.judge(odour(0.0, SX, SY), peaked(), EAST)
+    assert unpassed.final(9.0, peaked()) is None
+    named = passed().final(9.0, peaked())
+    assert isinstance(named, SourceDeclared)
+    assert (named.check, named.time_s, named.x, named.y, named.mass) == (CrossCheck.ENDURANCE, 9.0, SX, SY, 0.9)
+    unsure = peaked(peak=0.79)  # below final_probability (0.8)
+    assert passed(pi=unsure).final(9.0, unsure) is None
+    assert passed(admit=lambda cell: cell != SOURCE).final(9.0, peaked()) is None
+    smelt = passed()
+    smelt.judge(odour(2.0, SX - 1.5, SY + 2.0), peaked(), EAST)  # 1.5 m upflow, 2 m across
+    assert smelt.final(9.0, peaked()) is None
+    beside = passed()
+    beside.judge(odour(2.0, SX - 1.5, SY + 4.0), peaked(), EAST)  # 4 m across: beside, not upflow
+    assert isinstance(beside.final(9.0, peaked()), SourceDeclared)

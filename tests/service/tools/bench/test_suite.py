@@ -9,7 +9,8 @@ import pytest
 
 from service.cli import main
 from service.tools.bench import suite
-from service.tools.bench.search import FailureClass, MissionResult
+from service.core.config import load_config
+from service.tools.bench.search import FailureClass, MissionResult, with_endurance
 
 CLASS_KEYS = (
     "class",
@@ -174,6 +175,26 @@ def test_calibration_counts_the_statements_that_came_true() -> None:
     both = calibration + calibration
     assert (both.high, both.high_within) == (6, 2)
     assert "3 declarations stated at >= 95%: 33.3% had the source within" in calibration.line()
+
+
+def test_declarations_named_as_the_time_ran_out_are_counted_apart() -> None:
+    def declared(correct: bool, check: str | None) -> MissionResult:
+        return MissionResult(0, 0.0, 0.0, True, correct, 10.0, 0.0, 0.0, 1.0, 10.0, 1.0,
+                             confidence=0.9, radius_m=5.0, check=check)  # fmt: skip
+
+    results = [declared(True, "endurance"), declared(False, "endurance"), declared(True, "flown"), declared(True, None)]
+    named = suite.Endurance.of(results)
+    assert (named.declarations, named.correct) == (2, 1)
+    assert (named + named).as_row() == {"endurance_declarations": 4, "endurance_correct": 2}
+    assert "2 declarations, 1 correct, 1 wrong" in named.line()
+
+
+def test_a_mission_s_endurance_is_its_time_limit_or_the_configured_one_if_shorter() -> None:
+    config = load_config()
+    assert with_endurance(config, 300.0).vehicle.endurance_s == 300.0
+    shorter = config.model_copy(update={"vehicle": config.vehicle.model_copy(update={"endurance_s": 120.0})})
+    assert with_endurance(shorter, 300.0).vehicle.endurance_s == 120.0
+    assert with_endurance(shorter, 60.0).vehicle.endurance_s == 60.0
 
 
 def test_the_calibration_table_says_how_often_each_stated_band_came_true() -> None:
