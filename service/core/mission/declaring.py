@@ -382,14 +382,20 @@ class Declaring:
         if mass < self.config.final_probability or not self._declarer.admits(cell):
             return None
         x, y = self.grid.centre(cell)
-        found = Declaration(time_s, cell, self.grid.paper_number(cell), x, y, float(likelihood.flat[cell]), mass)
+        found = Declaration(
+            time_s, cell, self.grid.paper_number(cell), x, y, float(likelihood.flat[cell]), mass
+        )
         return self._declared(time_s, found, CrossCheck.ENDURANCE)
 
     def _note_odour(self, obs: Observation, cell: int, frame: FlowFrame | None) -> None:
         """Whether odour has been met upflow of ``cell``, the estimate, since it became the
         estimate: ``check_upflow_m / 2`` or more along the mean flow, within ``visit_radius_m``
         across it."""
-        seen = self._odour_upflow[1] if self._odour_upflow is not None and self._odour_upflow[0] == cell else False
+        seen = (
+            self._odour_upflow[1]
+            if self._odour_upflow is not None and self._odour_upflow[0] == cell
+            else False
+        )
         if obs.detected and frame is not None:
             cx, cy = self.grid.centre(cell)
             upflow = frame.along(cx - obs.x, cy - obs.y) >= 0.5 * self.config.check_upflow_m

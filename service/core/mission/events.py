@@ -46,7 +46,7 @@ class CrossCheck(StrEnum):
 
     FLOWN = "flown"  # flown, no odour upflow
     OFF = "off"  # no check configured (or no flow direction yet)
-    ENDURANCE = "endurance"  # not checked: the vehicle's endurance ran out (``declaration.final_probability``)
+    ENDURANCE = "endurance"  # not checked: named as the vehicle's endurance ran out
 
 
 @dataclass(frozen=True)

@@ -713,7 +713,10 @@ def endurance_mission(mapper: SourceMapper, endurance_s: float) -> Mission:
 
 
 def fly_until(
-    mission: Mission, vehicle: Vehicle, times: range, odour: Callable[[int, Vehicle], bool] = lambda t, v: False
+    mission: Mission,
+    vehicle: Vehicle,
+    times: range,
+    odour: Callable[[int, Vehicle], bool] = lambda t, v: False,
 ) -> list[MissionOutput]:
     """From SOURCE's centre with odour at t = 0, fly the waypoints one per tick (``odour`` says
     when a tick smells); the outputs of each tick from t = 0."""
@@ -723,7 +726,9 @@ def fly_until(
     for t in times:
         vehicle.follow(out.waypoints)
         vehicle.move()
-        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, odour(t, vehicle)), vehicle.state)
+        out = mission.step(
+            Observation(float(t), vehicle.x, vehicle.y, 1.0, 0.0, odour(t, vehicle)), vehicle.state
+        )
         outs.append(out)
     return outs
 
@@ -758,7 +763,9 @@ def test_the_endurance_names_nothing_unsure_unpassed_or_with_odour_upflow() -> N
     mapper = ScriptedMapper(AREA)
     mapper.peak_at(SOURCE, 0.9)
     mission = endurance_mission(mapper, endurance_s=8.0)
-    outs = fly_until(mission, Vehicle(sx, sy), range(1, 12), odour=lambda t, v: v.x <= sx - 2.0 and abs(v.y - sy) < 1)
+    outs = fly_until(
+        mission, Vehicle(sx, sy), range(1, 12), odour=lambda t, v: v.x <= sx - 2.0 and abs(v.y - sy) < 1
+    )
     assert all(o.state is not MissionState.DECLARED for o in outs)
     # the upflow pass not made: the map is sure of a cell the vehicle never went upflow of
     far = AREA.cell_of(80.0, -40.0)
@@ -770,7 +777,9 @@ def test_the_endurance_names_nothing_unsure_unpassed_or_with_odour_upflow() -> N
         assert out.state is not MissionState.DECLARED
     # and without an endurance the sure map of the first test waits for its check
     mission = endurance_mission(mapper, endurance_s=0.0)
-    assert all(o.state is not MissionState.DECLARED for o in fly_until(mission, Vehicle(sx, sy), range(1, 12)))
+    assert all(
+        o.state is not MissionState.DECLARED for o in fly_until(mission, Vehicle(sx, sy), range(1, 12))
+    )
 
 
 def test_the_endurance_is_counted_from_the_first_tick_across_a_restart() -> None:

@@ -327,7 +327,13 @@ def test_the_endurance_s_declaration_needs_the_upflow_pass_no_odour_upflow_and_t
     assert unpassed.final(9.0, peaked()) is None
     named = passed().final(9.0, peaked())
     assert isinstance(named, SourceDeclared)
-    assert (named.check, named.time_s, named.x, named.y, named.mass) == (CrossCheck.ENDURANCE, 9.0, SX, SY, 0.9)
+    assert (named.check, named.time_s, named.x, named.y, named.mass) == (
+        CrossCheck.ENDURANCE,
+        9.0,
+        SX,
+        SY,
+        0.9,
+    )
     unsure = peaked(peak=0.79)  # below final_probability (0.8)
     assert passed(pi=unsure).final(9.0, unsure) is None
     assert passed(admit=lambda cell: cell != SOURCE).final(9.0, peaked()) is None

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from service.cli import main
-from service.tools.bench import suite
 from service.core.config import load_config
+from service.tools.bench import suite
 from service.tools.bench.search import FailureClass, MissionResult, with_endurance
 
 CLASS_KEYS = (
@@ -182,7 +182,12 @@ def test_declarations_named_as_the_time_ran_out_are_counted_apart() -> None:
         return MissionResult(0, 0.0, 0.0, True, correct, 10.0, 0.0, 0.0, 1.0, 10.0, 1.0,
                              confidence=0.9, radius_m=5.0, check=check)  # fmt: skip
 
-    results = [declared(True, "endurance"), declared(False, "endurance"), declared(True, "flown"), declared(True, None)]
+    results = [
+        declared(True, "endurance"),
+        declared(False, "endurance"),
+        declared(True, "flown"),
+        declared(True, None),
+    ]
     named = suite.Endurance.of(results)
     assert (named.declarations, named.correct) == (2, 1)
     assert (named + named).as_row() == {"endurance_declarations": 4, "endurance_correct": 2}
