@@ -144,8 +144,9 @@ class Mission:
         """Continue in the phase ``save_state`` saved; a leg is laid out anew,
         and past the first detection the declaration rule is re-armed from the restored map. A
         snapshot's ``check_passes`` (the checks' tally, before step 39 of docs/search-benchmark.md)
-        is ignored; one without ``started_s`` counts the endurance from the next tick. The cells
-        visited near are not saved: after a restart the endurance names only cells visited since."""
+        is ignored; one without ``started_s`` counts the endurance from the next tick. The upflow
+        pass and the odour upflow of the estimate are not saved: after a restart the endurance names
+        a cell only once its upflow pass is made again."""
         phase = MissionState(state["phase"])
         started = state.get("started_s")
         self._started_s = None if started is None else float(started)

@@ -370,7 +370,7 @@ class ClassSummary:
     speeds: Speeds = field(default_factory=Speeds)
     speed_drawn: bool = True
     """Whether the class draws its vehicles' speed (the suite's split by speed counts only those)."""
-    endurance: Endurance = field(default_factory=lambda: Endurance())
+    endurance: Endurance = field(default_factory=Endurance)
     outcomes: tuple[tuple[MissionResult, float], ...] = field(default=(), repr=False, compare=False)
     """Each mission and its time limit, in seed order (``oslim bench suite --missions``)."""
 
@@ -453,7 +453,7 @@ class SuiteSummary:
     """Success by the vehicle's speed over the classes that draw it (a class flown at one speed
     would weigh its own difficulty into one band)."""
     speed_classes: int = 0
-    endurance: Endurance = field(default_factory=lambda: Endurance())
+    endurance: Endurance = field(default_factory=Endurance)
 
     def line(self) -> str:
         return (
