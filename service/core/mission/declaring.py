@@ -334,7 +334,6 @@ class Declaring:
         self.probe = EstimateProbe(
             grid, config.upflow_pass_m, min(config.visit_radius_m, reach_m), config.check_width_m
         )
-        self._odour_upflow: tuple[int, bool] | None = None  # (estimated cell, odour met upflow of it since)
 
     @property
     def armed(self) -> bool:
@@ -374,33 +373,17 @@ class Declaring:
         ``final_probability`` of the map lies within ``radius_m`` of it (its stated confidence).
         None otherwise (docs/search-benchmark.md, step 40)."""
         cell = int(np.argmax(likelihood))
-        if not (self._declarer.armed and self._declarer.passed_upflow):
-            return None
-        if self._odour_upflow != (cell, False):
+        declarer = self._declarer
+        if declarer.cell != cell or not declarer.passed_upflow or declarer.odour_upflow:
             return None
         mass = mass_within(self.grid, likelihood, cell, self.config.radius_m)
-        if mass < self.config.final_probability or not self._declarer.admits(cell):
+        if mass < self.config.final_probability or not declarer.admits(cell):
             return None
         x, y = self.grid.centre(cell)
         found = Declaration(
             time_s, cell, self.grid.paper_number(cell), x, y, float(likelihood.flat[cell]), mass
         )
         return self._declared(time_s, found, CrossCheck.ENDURANCE)
-
-    def _note_odour(self, obs: Observation, cell: int, frame: FlowFrame | None) -> None:
-        """Whether odour has been met upflow of ``cell``, the estimate, since it became the
-        estimate: ``check_upflow_m / 2`` or more along the mean flow, within ``visit_radius_m``
-        across it."""
-        seen = (
-            self._odour_upflow[1]
-            if self._odour_upflow is not None and self._odour_upflow[0] == cell
-            else False
-        )
-        if obs.detected and frame is not None:
-            cx, cy = self.grid.centre(cell)
-            upflow = frame.along(cx - obs.x, cy - obs.y) >= 0.5 * self.config.check_upflow_m
-            seen = seen or (upflow and abs(frame.cross(cx - obs.x, cy - obs.y)) <= self.config.visit_radius_m)
-        self._odour_upflow = (cell, seen)
 
     def reset(self) -> None:
         """A new mission state: no check, no probe detour (a pass probe stays while it applies)."""
@@ -416,8 +399,7 @@ class Declaring:
             return None
         t = obs.time_s
         flow = None if frame is None else (frame.ux, frame.uy)
-        found = self._declarer.update(t, likelihood, (obs.x, obs.y), flow)
-        self._note_odour(obs, int(np.argmax(likelihood)), frame)
+        found = self._declarer.update(t, likelihood, (obs.x, obs.y), flow, obs.detected)
         if self.check is not None and self.check.done:
             # flown with no odour upflow, and odour at the cell again: the rule fired at the
             # estimate when the check began

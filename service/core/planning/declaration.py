@@ -82,11 +82,24 @@ class Declarer:
         self._admit = admit
         self._cell: int | None = None
         self._passed_upflow = False  # the vehicle has been upflow_pass_m upflow of self._cell
+        self._odour_upflow = False  # odour met check_upflow_m / 2 upflow of self._cell
 
     @property
     def passed_upflow(self) -> bool:
         """Whether the vehicle has made the upflow pass of the current estimate."""
         return self._passed_upflow
+
+    @property
+    def odour_upflow(self) -> bool:
+        """Whether odour has been met upflow of the current estimate since it became the estimate:
+        ``check_upflow_m / 2`` or more along the mean flow (where odour calls a check off), within
+        ``visit_radius_m`` across it."""
+        return self._odour_upflow
+
+    @property
+    def cell(self) -> int | None:
+        """The current estimate (flat cell) the pass and the odour upflow are about; None unarmed."""
+        return self._cell
 
     def accept_pass(self) -> None:
         """Count the upflow pass of the current estimate as made: the vehicle went as far upflow as
@@ -101,6 +114,7 @@ class Declarer:
         """Start judging at ``time_s`` (the first detection)."""
         self._cell = int(np.argmax(likelihood))
         self._passed_upflow = False
+        self._odour_upflow = False
 
     def update(
         self,
@@ -108,18 +122,26 @@ class Declarer:
         likelihood: FloatArray,
         vehicle_m: tuple[float, float] | None = None,
         flow: tuple[float, float] | None = None,
+        detected: bool = False,
     ) -> Declaration | None:
         """The declaration if the rule fires at this tick, else None (always None unarmed).
         With ``vehicle_m`` (x, y), nothing fires while the vehicle is farther than
         ``visit_radius_m`` from the estimated cell's centre. With ``upflow_pass_m`` > 0, nothing
         fires until the vehicle (``vehicle_m``) has been that far upflow of the centre against
-        ``flow`` (the mean flow direction, any length); without both, never."""
+        ``flow`` (the mean flow direction, any length); without both, never. ``detected``: this
+        tick's odour, at ``vehicle_m`` (``odour_upflow``)."""
         if self._cell is None:
             return None
         cell = int(np.argmax(likelihood))
         if cell != self._cell:
             self._cell = cell
             self._passed_upflow = False
+            self._odour_upflow = False
+        if detected and not self._odour_upflow:
+            offset = self._offset(cell, vehicle_m, flow)
+            self._odour_upflow = offset is not None and (
+                offset[0] >= 0.5 * self.config.check_upflow_m and offset[1] <= self.config.visit_radius_m
+            )
         if self.config.upflow_pass_m > 0.0:
             self._passed_upflow = self._passed_upflow or self._is_upflow(cell, vehicle_m, flow)
             if not self._passed_upflow:
@@ -153,14 +175,23 @@ class Declarer:
     ) -> bool:
         """Whether the vehicle is ``upflow_pass_m`` or more upflow of ``cell``'s centre and within
         ``visit_radius_m`` of the flow line through it."""
-        if vehicle_m is None or flow is None:
+        offset = self._offset(cell, vehicle_m, flow)
+        if offset is None:
             return False
+        upflow_m, across_m = offset
+        return upflow_m >= self.config.upflow_pass_m - 1e-9 and across_m <= self.config.visit_radius_m
+
+    def _offset(
+        self, cell: int, vehicle_m: tuple[float, float] | None, flow: tuple[float, float] | None
+    ) -> tuple[float, float] | None:
+        """How far upflow of ``cell``'s centre the vehicle is along ``flow``, and how far from the
+        flow line through it; None without a position or a flow."""
+        if vehicle_m is None or flow is None:
+            return None
         speed = math.hypot(*flow)
         if speed == 0.0:
-            return False
+            return None
         ux, uy = flow[0] / speed, flow[1] / speed
         cx, cy = self.grid.centre(cell)
         dx, dy = vehicle_m[0] - cx, vehicle_m[1] - cy
-        upflow_m = -(dx * ux + dy * uy)
-        across_m = abs(dx * uy - dy * ux)
-        return upflow_m >= self.config.upflow_pass_m - 1e-9 and across_m <= self.config.visit_radius_m
+        return -(dx * ux + dy * uy), abs(dx * uy - dy * ux)

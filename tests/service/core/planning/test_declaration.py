@@ -132,3 +132,29 @@ def test_admit_ignores_a_rule_for_a_refused_cell() -> None:
     found = admitted.update(1.0, peaked(12, 0.6))
     assert found is not None
     assert found.cell == 12
+
+
+def test_odour_upflow_is_odour_half_the_check_upflow_of_the_estimate_until_it_changes() -> None:
+    config = PAPERS_DECLARATION.model_copy(
+        update={"probability": 0.99, "check_upflow_m": 3.0, "visit_radius_m": 1.0}
+    )
+    d = Declarer(G, config)
+    pi = peaked(12, 0.6)  # centre (2.5, 2.5); flow toward +x, so upflow is -x
+    east = (1.0, 0.0)
+    assert d.cell is None
+    d.arm(0.0, pi)
+    assert d.cell == 12
+    assert not d.odour_upflow
+    d.update(1.0, pi, (1.2, 2.5), east, detected=True)  # 1.3 m upflow: short of 1.5 m
+    d.update(2.0, pi, (0.9, 3.6), east, detected=True)  # 1.6 m upflow but 1.1 m across
+    d.update(3.0, pi, (0.5, 2.5), east, detected=False)  # 2 m upflow, no odour
+    d.update(4.0, pi, (0.5, 2.5), None, detected=True)  # no flow: cannot tell upflow
+    assert not d.odour_upflow
+    d.update(5.0, pi, (1.0, 3.0), east, detected=True)  # 1.5 m upflow, 0.5 m across
+    assert d.odour_upflow
+    d.update(6.0, pi, (4.5, 2.5), east, detected=True)  # odour downflow later does not undo it
+    assert d.odour_upflow
+    other = peaked(13, 0.6)  # a new estimate starts clean
+    d.update(7.0, other, (4.5, 2.5), east)
+    assert d.cell == 13
+    assert not d.odour_upflow
