@@ -172,6 +172,12 @@ class DeclarationConfig(_Section):
     within ``radius_m`` of it, the upflow pass (``upflow_pass_m`` > 0) has been made since it became
     the estimate, and no odour has been met ``check_upflow_m / 2`` or more upflow of it since."""
 
+    @property
+    def cancel_upflow_m(self) -> float:
+        """Odour this far or more upflow of an estimated cell's centre calls its check off (and
+        bars naming it at the endurance): half of ``check_upflow_m``, m."""
+        return 0.5 * self.check_upflow_m
+
     def for_mapper(self, mapper: str) -> DeclarationConfig:
         """This configuration as it applies to the mapper named ``mapper``: ``hmm_probability``,
         no upflow pass for the hmm, unchanged for any other (including mappers

@@ -115,7 +115,7 @@ class Check:
             low, high = sorted(frame.cross(end.x, end.y) for end in legs)
             line = min(max(frame.cross(ax, ay), low), high)
             legs = (*legs, frame.point(frame.along(legs[-1].x, legs[-1].y), line))
-        cancel_upflow = 0.5 * upflow
+        cancel_upflow = config.cancel_upflow_m
         bx, by = found.x + cancel_upflow * frame.ux, found.y + cancel_upflow * frame.uy
         if not grid.contains(bx, by) or grid.in_obstacle(bx, by):
             bx, by = found.x, found.y

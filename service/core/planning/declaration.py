@@ -92,7 +92,7 @@ class Declarer:
     @property
     def odour_upflow(self) -> bool:
         """Whether odour has been met upflow of the current estimate since it became the estimate:
-        ``check_upflow_m / 2`` or more along the mean flow (where odour calls a check off), within
+        ``cancel_upflow_m`` or more along the mean flow (where odour calls a check off), within
         ``visit_radius_m`` across it."""
         return self._odour_upflow
 
@@ -140,7 +140,7 @@ class Declarer:
         if detected and not self._odour_upflow:
             offset = self._offset(cell, vehicle_m, flow)
             self._odour_upflow = offset is not None and (
-                offset[0] >= 0.5 * self.config.check_upflow_m and offset[1] <= self.config.visit_radius_m
+                offset[0] >= self.config.cancel_upflow_m and offset[1] <= self.config.visit_radius_m
             )
         if self.config.upflow_pass_m > 0.0:
             self._passed_upflow = self._passed_upflow or self._is_upflow(cell, vehicle_m, flow)
