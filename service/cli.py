@@ -425,6 +425,14 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
         t,
         'one JSON object per class, then "all", "rover" and "auv" (the classes with both kinds)',
     )
+    t.add_argument(
+        "--time-scale",
+        type=_finite(zero=False),
+        default=1.0,
+        metavar="K",
+        help="a diagnostic: every class's time limit times K, as oslim bench suite --time-scale "
+        "(which phase a slow mission finishes with more time); default 1: the suite's limits",
+    )
 
     p = kinds.add_parser("plume", help="filament plume model: steps per second at a puff count")
     p.add_argument("--puffs", type=int, default=10_000, help="live puffs at steady state (default 10000)")

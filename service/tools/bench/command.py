@@ -193,9 +193,16 @@ def _class_batches(
     """The missions of a diagnostic over the suite's classes, announced by ``title`` (its
     ``{missions}`` filled in) unless the output is JSON."""
     files = _class_files(command, None, args.classes)
-    batches = suite.class_missions(files, args.runs, args.first_seed, args.config, args.overrides)
+    scale = getattr(args, "time_scale", 1.0)
+    batches = suite.class_missions(
+        files, args.runs, args.first_seed, args.config, args.overrides, time_scale=scale
+    )
     if not args.json:
-        print(title.format(missions=_missions(args, files)), flush=True)
+        print(
+            title.format(missions=_missions(args, files))
+            + (TIME_SCALE.format(scale) if scale != 1.0 else ""),
+            flush=True,
+        )
     return batches
 
 

@@ -65,7 +65,8 @@ def _span(start: float | None, end: float | None) -> float | None:
 
 
 def mission_phases(spec: SuiteMission) -> Phases:
-    """One suite mission run to its time limit, with its phases marked (a worker's task)."""
+    """One suite mission run to its time limit (times ``spec.time_scale``), with its phases marked
+    (a worker's task)."""
     drawn = drawn_world(spec)
     began: list[float] = []  # when each check across the flow began
     ticks = 0
@@ -79,11 +80,12 @@ def mission_phases(spec: SuiteMission) -> Phases:
             began.append(step.time_s)
         checking = now
 
-    result = run_mission(drawn.scenario, spec.seed, max_time_s=drawn.time_limit_s, on_tick=record)
+    limit = drawn.time_limit_s * spec.time_scale
+    result = run_mission(drawn.scenario, spec.seed, max_time_s=limit, on_tick=record)
     reached = result.reached_s
     return Phases(
         vehicle="auv" if drawn.scenario.world.vehicle.slows_to_turn else "rover",
-        limit_s=drawn.time_limit_s,
+        limit_s=limit,
         correct=result.correct,
         first_odour_s=result.first_detection_s,
         at_source_s=reached,

@@ -87,6 +87,16 @@ def test_a_declared_mission_marks_its_phases_in_order() -> None:
     assert mission.check_ticks >= mission.vouching_s
 
 
+def test_the_time_scale_stretches_or_cuts_the_limit_the_mission_runs_to() -> None:
+    full = phases.mission_phases(SuiteMission(str(SUITE_DIR / "wang-laminar.toml"), 0))
+    cut = phases.mission_phases(SuiteMission(str(SUITE_DIR / "wang-laminar.toml"), 0, time_scale=0.1))
+    assert cut.limit_s == pytest.approx(0.1 * full.limit_s)
+    assert full.declared_s is not None
+    assert full.declared_s > cut.limit_s
+    assert not cut.correct
+    assert cut.declared_s is None
+
+
 def test_json_gives_the_class_then_each_vehicle_kind(capsys: pytest.CaptureFixture[str]) -> None:
     # steady seeds 2 and 3 draw a rover and an AUV
     args = [
