@@ -384,12 +384,9 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
         help="every simulated vehicle stops M m short of its targets, as ArduPilot Rover does within "
         "WP_RADIUS (2 m by default); default 0: they drive onto them",
     )
-    w.add_argument(
-        "--time-scale",
-        type=_finite(zero=False),
-        default=1.0,
-        metavar="K",
-        help="a diagnostic, not a result: every class's time limit times K (with K = 2, the failures "
+    _add_time_scale(
+        w,
+        "a diagnostic, not a result: every class's time limit times K (with K = 2, the failures "
         "that succeed were slow, the others stuck); default 1: the suite",
     )
 
@@ -425,18 +422,20 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
         t,
         'one JSON object per class, then "all", "rover" and "auv" (the classes with both kinds)',
     )
-    t.add_argument(
-        "--time-scale",
-        type=_finite(zero=False),
-        default=1.0,
-        metavar="K",
-        help="a diagnostic: every class's time limit times K, as oslim bench suite --time-scale "
+    _add_time_scale(
+        t,
+        "a diagnostic: every class's time limit times K, as oslim bench suite --time-scale "
         "(which phase a slow mission finishes with more time); default 1: the suite's limits",
     )
 
     p = kinds.add_parser("plume", help="filament plume model: steps per second at a puff count")
     p.add_argument("--puffs", type=int, default=10_000, help="live puffs at steady state (default 10000)")
     p.add_argument("--json", action="store_true", help="one JSON object")
+
+
+def _add_time_scale(parser: argparse.ArgumentParser, help_text: str) -> None:
+    """``--time-scale K``: every class's time limit times K (a diagnostic of suite missions)."""
+    parser.add_argument("--time-scale", type=_finite(zero=False), default=1.0, metavar="K", help=help_text)
 
 
 def _add_class_run_arguments(parser: argparse.ArgumentParser, json_help: str) -> None:
