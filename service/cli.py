@@ -428,6 +428,29 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
         "(which phase a slow mission finishes with more time); default 1: the suite's limits",
     )
 
+    k = kinds.add_parser(
+        "track",
+        help="one suite mission tick by tick, in the true source's frame: what a failed mission did",
+    )
+    k.add_argument("--class", dest="class_name", required=True, metavar="NAME", help="the mission's class")
+    k.add_argument("--seed", type=_at_least(0), required=True, help="the mission's seed")
+    k.add_argument(
+        "--config", default=None, metavar="FILE", help="service configuration (default config/default.toml)"
+    )
+    _add_overrides(k, "KEY=VALUE", "override a service key (e.g. mapping.sigma_x=0.3)", dest="overrides")
+    _add_time_scale(k, "the class's time limit times K, as oslim bench suite --time-scale; default 1")
+    k.add_argument(
+        "--every",
+        type=_finite(zero=True),
+        default=5.0,
+        metavar="S",
+        help="a line each S seconds besides each detection, change of state and the last tick "
+        "(default 5; 0: every tick)",
+    )
+    k.add_argument(
+        "--json", action="store_true", help="one JSON object for the mission, then one per tick shown"
+    )
+
     p = kinds.add_parser("plume", help="filament plume model: steps per second at a puff count")
     p.add_argument("--puffs", type=int, default=10_000, help="live puffs at steady state (default 10000)")
     p.add_argument("--json", action="store_true", help="one JSON object")

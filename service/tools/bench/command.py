@@ -35,6 +35,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_phases(args)
     if args.bench == "compare":
         return _run_compare(args)
+    if args.bench == "track":
+        return _run_track(args)
     raise AssertionError(args.bench)
 
 
@@ -352,6 +354,56 @@ def _run_suite(args: argparse.Namespace) -> int:
                     args.missions, (compare.mission_row(row.name, r, limit) for r, limit in row.outcomes)
                 )
     return 0
+
+
+TRACK_HEADER = (
+    f"{'t s':>6}  {'state':<8}{'along':>8}{'across':>8}{'odour':>6}{'est along':>11}{'est across':>11}"
+    f"{'cell':>7}{'mass':>7}"
+)
+
+
+def _run_track(args: argparse.Namespace) -> int:
+    from service.tools.bench import track
+
+    (path,) = _class_files("track", None, [args.class_name])
+    ((_, (spec,)),) = suite.class_missions(
+        [path], 1, args.seed, args.config, args.overrides, time_scale=args.time_scale
+    )
+    mission = track.mission_track(spec)
+    ticks = track.shown(mission.ticks, args.every)
+    if args.json:
+        print(json.dumps({"class": args.class_name, **mission.summary()}), flush=True)
+        for tick in ticks:
+            print(json.dumps(tick.as_row()), flush=True)
+        return 0
+    m = mission.summary()
+    print(
+        f"{args.class_name} seed {args.seed}, configuration {_configuration(args)}"
+        + (TIME_SCALE.format(args.time_scale) if args.time_scale != 1.0 else "")
+        + f": {m['outcome']} at {m['time_s']:.0f} s of {m['limit_s']:.0f} s; first odour "
+        f"{_fmt_s(m['first_odour_s'])}, within one cell of the source {_fmt_s(m['reached_s'])}, "
+        f"{m['detections']} detections"
+        + ("" if m["error_m"] is None else f", declared {m['error_m']:.1f} m from the source"),
+        flush=True,
+    )
+    print(
+        "positions in m along and across the mean flow from the true source (along > 0: downflow); "
+        "cell: the estimated cell's share of the map; mass: the map within declaration.radius_m of it",
+        flush=True,
+    )
+    print(TRACK_HEADER, flush=True)
+    for t in ticks:
+        print(
+            f"{t.time_s:>6.0f}  {t.state:<8}{t.along_m:>8.1f}{t.across_m:>8.1f}"
+            f"{'yes' if t.detected else '':>6}{t.estimate_along_m:>11.1f}{t.estimate_across_m:>11.1f}"
+            f"{t.estimate_share:>7.2f}{t.mass:>7.2f}",
+            flush=True,
+        )
+    return 0
+
+
+def _fmt_s(value: float | None) -> str:
+    return "never" if value is None else f"at {value:.0f} s"
 
 
 def _run_compare(args: argparse.Namespace) -> int:
