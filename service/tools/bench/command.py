@@ -75,6 +75,11 @@ ORACLE = "; ORACLE declaration (a perfect guard: a bound, not a result)"
 TIME_SCALE = "; TIME LIMITS x {:g} (a diagnostic, not the suite's result)"
 
 
+def _time_scale_note(scale: float) -> str:
+    """What a title adds when the time limits are scaled (nothing at the suite's own limits)."""
+    return TIME_SCALE.format(scale) if scale != 1.0 else ""
+
+
 def _print_json(row: dict[str, Any], oracle: bool, time_scale: float = 1.0) -> None:
     """One JSON object of a search or suite run; a bound under the oracle, or a run with scaled
     time limits, says so."""
@@ -190,21 +195,16 @@ def _configuration(args: argparse.Namespace) -> str:
 
 
 def _class_batches(
-    args: argparse.Namespace, command: str, title: str
+    args: argparse.Namespace, command: str, title: str, time_scale: float = 1.0
 ) -> list[tuple[str, list[suite.SuiteMission]]]:
-    """The missions of a diagnostic over the suite's classes, announced by ``title`` (its
-    ``{missions}`` filled in) unless the output is JSON."""
+    """The missions of a diagnostic over the suite's classes, each run to ``time_scale`` times its
+    limit, announced by ``title`` (its ``{missions}`` filled in) unless the output is JSON."""
     files = _class_files(command, None, args.classes)
-    scale = getattr(args, "time_scale", 1.0)
     batches = suite.class_missions(
-        files, args.runs, args.first_seed, args.config, args.overrides, time_scale=scale
+        files, args.runs, args.first_seed, args.config, args.overrides, time_scale=time_scale
     )
     if not args.json:
-        print(
-            title.format(missions=_missions(args, files))
-            + (TIME_SCALE.format(scale) if scale != 1.0 else ""),
-            flush=True,
-        )
+        print(title.format(missions=_missions(args, files)) + _time_scale_note(time_scale), flush=True)
     return batches
 
 
@@ -281,6 +281,7 @@ def _run_phases(args: argparse.Namespace) -> int:
         "check across the flow begun there (the rule fired); check: the check that vouched for a "
         "declared cell, begun to flown; checks: begun in all (call-offs begin another), flown for "
         "check s ticks; rover, auv: the missions of the classes that drew both kinds of vehicle",
+        args.time_scale,
     )
     if not args.json:
         print(PHASES_HEADER, flush=True)
@@ -330,7 +331,7 @@ def _run_suite(args: argparse.Namespace) -> int:
             f"suite {args.suite or 'config/suites'}: {_missions(args, files)}; "
             "times: median / p90 to a correct declaration"
             + (ORACLE if args.oracle_declaration else "")
-            + (TIME_SCALE.format(args.time_scale) if args.time_scale != 1.0 else ""),
+            + _time_scale_note(args.time_scale),
             flush=True,
         )
         print(suite.HEADER, flush=True)
@@ -379,7 +380,7 @@ def _run_track(args: argparse.Namespace) -> int:
     m = mission.summary()
     print(
         f"{args.class_name} seed {args.seed}, configuration {_configuration(args)}"
-        + (TIME_SCALE.format(args.time_scale) if args.time_scale != 1.0 else "")
+        + _time_scale_note(args.time_scale)
         + f": {m['outcome']} at {m['time_s']:.0f} s of {m['limit_s']:.0f} s; first odour "
         f"{_fmt_s(m['first_odour_s'])}, within one cell of the source {_fmt_s(m['reached_s'])}, "
         f"{m['detections']} detections"

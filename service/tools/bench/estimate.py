@@ -25,7 +25,7 @@ from service.api import Search, Step
 from service.core.mission.events import MissionState
 from service.core.planning.declaration import mass_within
 from service.tools.bench.search import run_mission, within_one_cell
-from service.tools.bench.suite import SuiteMission, drawn_world, source_and_flow
+from service.tools.bench.suite import SuiteMission, drawn_world, source_frame
 from service.tools.bench.workers import in_order_by_batch
 
 AT_ODOUR_M = 5.0
@@ -68,7 +68,8 @@ class Outcome:
 def mission_places(spec: SuiteMission) -> tuple[str, Places]:
     """How one suite mission ended, and where its estimate was while it traced (a worker's task)."""
     drawn = drawn_world(spec)
-    (sx, sy), (ux, uy) = source_and_flow(drawn, spec.seed)
+    frame = source_frame(drawn, spec.seed)
+    sx, sy = frame.source
     area = drawn.scenario.grid
     places = Places()
     odour: list[tuple[float, float]] = []
@@ -89,7 +90,7 @@ def mission_places(spec: SuiteMission) -> tuple[str, Places]:
                 places.at_source_with_mass += 1
             else:
                 places.at_source += 1
-        elif (ex - sx) * ux + (ey - sy) * uy > 0.0:
+        elif frame.along_across(ex, ey)[0] > 0.0:
             places.away_downflow += 1
         else:
             places.away_upflow_or_beside += 1

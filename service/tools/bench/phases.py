@@ -17,7 +17,7 @@ from typing import Any
 
 from service.api import Search, Step
 from service.tools.bench.search import run_mission
-from service.tools.bench.suite import SuiteMission, drawn_world
+from service.tools.bench.suite import SuiteMission, drawn_world, time_limit_s
 from service.tools.bench.workers import in_order_by_batch
 
 
@@ -80,7 +80,7 @@ def mission_phases(spec: SuiteMission) -> Phases:
             began.append(step.time_s)
         checking = now
 
-    limit = drawn.time_limit_s * spec.time_scale
+    limit = time_limit_s(spec, drawn)
     result = run_mission(drawn.scenario, spec.seed, max_time_s=limit, on_tick=record)
     reached = result.reached_s
     return Phases(

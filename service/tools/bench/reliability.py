@@ -21,7 +21,7 @@ import numpy.typing as npt
 
 from service.api import Search, Step
 from service.tools.bench.search import run_mission
-from service.tools.bench.suite import SuiteMission, drawn_world, source_and_flow
+from service.tools.bench.suite import SuiteMission, drawn_world, source_frame
 from service.tools.bench.workers import in_order_by_batch
 
 ON_LINE_M = 2.0
@@ -72,7 +72,8 @@ class Band:
 def mission_ticks(spec: SuiteMission) -> Ticks:
     """The ticks of one suite mission (a worker's task)."""
     drawn = drawn_world(spec)
-    (sx, sy), (ux, uy) = source_and_flow(drawn, spec.seed)
+    frame = source_frame(drawn, spec.seed)
+    sx, sy = frame.source
     rows: list[tuple[float, float, float, bool]] = []
 
     def record(search: Search, step: Step) -> None:
@@ -81,8 +82,8 @@ def mission_ticks(spec: SuiteMission) -> Ticks:
             return  # the mapper fuses no event from outside the area
         chance = search.mapper.detection_likelihood(grid.cell_of(obs.x, obs.y))
         row, col = grid.row_col(grid.cell_of(sx, sy))
-        dx, dy = obs.x - sx, obs.y - sy
-        rows.append((dx * ux + dy * uy, abs(dx * uy - dy * ux), float(chance[row, col]), obs.detected))
+        along, across = frame.along_across(obs.x, obs.y)
+        rows.append((along, abs(across), float(chance[row, col]), obs.detected))
 
     run_mission(drawn.scenario, spec.seed, max_time_s=drawn.time_limit_s, on_tick=record)
     table = np.array(rows, dtype=float).reshape(-1, 4)

@@ -111,19 +111,39 @@ def drawn_world(spec: SuiteMission) -> DrawnWorld:
     return replace(drawn, scenario=scenario)
 
 
-def source_and_flow(drawn: DrawnWorld, seed: int) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Where the drawn world's source is (m) and the unit direction of its mean flow (East when
-    there is none): the frame a diagnostic measures along and across."""
+@dataclass(frozen=True)
+class SourceFrame:
+    """Where a drawn world's source is (m) and the unit direction of its mean flow (East when there
+    is none): the frame a diagnostic measures along and across."""
+
+    source: tuple[float, float]
+    flow: tuple[float, float]
+
+    def along_across(self, x: float, y: float) -> tuple[float, float]:
+        """(x, y) along the mean flow from the source (> 0: downflow of it) and across it (> 0: to
+        the flow's left)."""
+        (sx, sy), (ux, uy) = self.source, self.flow
+        dx, dy = x - sx, y - sy
+        return dx * ux + dy * uy, dy * ux - dx * uy
+
+
+def source_frame(drawn: DrawnWorld, seed: int) -> SourceFrame:
+    """The source frame of the world drawn from ``seed``."""
     placement = place(drawn.scenario, seed)
     fx, fy = placement.mean_flow_mps
     speed = math.hypot(fx, fy)
-    return placement.source_m, ((fx / speed, fy / speed) if speed > 0 else (1.0, 0.0))
+    return SourceFrame(placement.source_m, (fx / speed, fy / speed) if speed > 0 else (1.0, 0.0))
+
+
+def time_limit_s(spec: SuiteMission, drawn: DrawnWorld) -> float:
+    """The time a suite mission runs to: its class's limit for the drawn world times ``spec.time_scale``."""
+    return drawn.time_limit_s * spec.time_scale
 
 
 def run_suite_mission(spec: SuiteMission) -> tuple[MissionResult, float]:
     """The mission and its time limit, scaled by ``spec.time_scale`` (a worker's task)."""
     drawn = drawn_world(spec)
-    limit = drawn.time_limit_s * spec.time_scale
+    limit = time_limit_s(spec, drawn)
     return run_mission(drawn.scenario, spec.seed, max_time_s=limit, oracle=spec.oracle), limit
 
 

@@ -20,7 +20,7 @@ import numpy as np
 from service.api import Search, Step
 from service.core.planning.declaration import mass_within
 from service.tools.bench.search import run_mission
-from service.tools.bench.suite import SuiteMission, drawn_world, source_and_flow
+from service.tools.bench.suite import SuiteMission, drawn_world, source_frame, time_limit_s
 
 SUCCESS = "success"
 
@@ -85,20 +85,16 @@ class MissionTrack:
 def mission_track(spec: SuiteMission) -> MissionTrack:
     """One suite mission run to its time limit (times ``spec.time_scale``), every tick recorded."""
     drawn = drawn_world(spec)
-    (sx, sy), (ux, uy) = source_and_flow(drawn, spec.seed)
+    frame = source_frame(drawn, spec.seed)
     ticks: list[TrackTick] = []
-
-    def frame(x: float, y: float) -> tuple[float, float]:
-        dx, dy = x - sx, y - sy
-        return dx * ux + dy * uy, dy * ux - dx * uy
 
     def record(search: Search, step: Step) -> None:
         grid, pi = search.model_grid, np.asarray(search.mapper.likelihood)
         cell = int(np.argmax(pi))
         decl = search.config.declaration.for_mapper(search.mapper.name)  # the radius the rule uses
         obs = step.observation
-        along, across = frame(obs.x, obs.y)
-        est_along, est_across = frame(*grid.centre(cell))
+        along, across = frame.along_across(obs.x, obs.y)
+        est_along, est_across = frame.along_across(*grid.centre(cell))
         mass = mass_within(grid, pi, cell, decl.radius_m)
         ticks.append(
             TrackTick(
@@ -114,7 +110,7 @@ def mission_track(spec: SuiteMission) -> MissionTrack:
             )
         )
 
-    limit = drawn.time_limit_s * spec.time_scale
+    limit = time_limit_s(spec, drawn)
     result = run_mission(drawn.scenario, spec.seed, max_time_s=limit, on_tick=record)
     failure = result.failure
     return MissionTrack(
@@ -132,13 +128,15 @@ def mission_track(spec: SuiteMission) -> MissionTrack:
 def shown(ticks: tuple[TrackTick, ...], every_s: float) -> list[TrackTick]:
     """The ticks worth a line: one each ``every_s`` seconds, each detection, each change of state,
     and the last; every tick when ``every_s`` <= 0."""
+    if every_s <= 0:
+        return list(ticks)
     out: list[TrackTick] = []
-    next_s = -math.inf
+    next_s = -math.inf  # the first tick is shown
     for i, tick in enumerate(ticks):
+        due = tick.time_s >= next_s
+        if due:
+            next_s = (math.floor(tick.time_s / every_s) + 1) * every_s
         changed = i > 0 and tick.state != ticks[i - 1].state
-        last = i == len(ticks) - 1
-        if every_s <= 0 or tick.time_s >= next_s or tick.detected or changed or last:
+        if due or tick.detected or changed or i == len(ticks) - 1:
             out.append(tick)
-            if tick.time_s >= next_s:
-                next_s = (math.floor(tick.time_s / every_s) + 1) * every_s if every_s > 0 else -math.inf
     return out

@@ -10,7 +10,7 @@ import pytest
 from service.cli import main
 from service.tools.bench import track
 from service.tools.bench.search import run_mission
-from service.tools.bench.suite import SuiteMission, drawn_world, source_and_flow
+from service.tools.bench.suite import SuiteMission, drawn_world, source_frame
 from sim_bridge.generator import SUITE_DIR
 
 WANG = SuiteMission(str(SUITE_DIR / "wang-laminar.toml"), 0)
@@ -53,7 +53,7 @@ def test_a_mission_is_tracked_in_the_sources_frame_to_its_declaration() -> None:
 
     # the frame is a rotation about the source: distances to it are the world's
     drawn = drawn_world(WANG)
-    (sx, sy), _ = source_and_flow(drawn, WANG.seed)
+    sx, sy = source_frame(drawn, WANG.seed).source
     recorded = run_mission(drawn.scenario, WANG.seed, max_time_s=drawn.time_limit_s, record=True).trace
     assert recorded is not None
     for point, t in zip(recorded.track, mission.ticks, strict=True):
