@@ -5,13 +5,14 @@ tracing, and source declaration". The states, and the behaviour that flies each:
 
 - ``FIND`` (published as ``search``): no detection yet; straight legs, each the one the map
   expects odour on most often per metre (``Prospect``).
-- ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate; the
-  declaration's legs (``Declaring``: the check across the flow, the probe at the estimate) go
-  first.
+- ``TRACE``: the configured planner (``planning.method``) toward the mapper's estimate, or toward
+  the map's greatest cell at most ``TRACE_SLACK_M`` downflow of the last detection when the
+  estimate lies farther downflow (a source lies upflow of its odour); the declaration's legs
+  (``Declaring``: the check across the flow, the probe at the estimate) go first.
 - ``LOST``: no detection for ``lost_after_s`` while tracing; the vehicle flies on as in
-  ``TRACE``, toward the map's estimate, which holds the misses since (a cast across the flow
-  around the last detection was measured and deleted: docs/search-benchmark.md, step 15). A
-  detection returns to ``TRACE``.
+  ``TRACE``, toward the map's greatest cell upflow of the last odour, whose map holds the misses
+  since (a cast across the flow around the last detection was measured and deleted:
+  docs/search-benchmark.md, step 15). A detection returns to ``TRACE``.
   With ``lone_contact_hits`` > 0, a contact met in ``FIND`` with at most that many detections is
   lost after ``lone_contact_lost_after_s`` instead, and goes back to ``FIND`` (a new leg from
   where it stopped, chosen by the map that now holds the contact): a false alarm (the
@@ -36,7 +37,10 @@ planner aims at the nearest reachable cell instead; when a planner still finds n
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
 
 from service.core.config import DeclarationConfig, PlanningConfig
 from service.core.mission.declaring import Check, Declaring
@@ -54,7 +58,7 @@ from service.core.mission.routing import Routing
 from service.core.mission.transitions import TRANSITIONS, Cue
 from service.core.planning import make_planner
 from service.core.planning.base import PlanContext, Waypoint
-from service.core.planning.crossflow import FlowFrame
+from service.core.planning.crossflow import FlowFrame, upflow_cells
 from service.core.planning.safety import clamped_cell
 
 if TYPE_CHECKING:
@@ -63,6 +67,13 @@ if TYPE_CHECKING:
     from service.core.mapping.mapper import SourceMapper
     from service.core.observation import Observation
     from service.core.planning.base import Planner, VehicleState
+
+TRACE_SLACK_M = 3.0
+"""The trace's goal lies at most this far downflow of the last detection, along the mean flow: a
+source lies upflow of its odour, give or take the mean flow's direction and a cell. A map that has
+given the plume up keeps its mass where no observation reached, often on the downflow edge, and
+its greatest cell there would send the vehicle away from the plume (docs/search-benchmark.md,
+steps 36 and 43)."""
 
 
 class Mission:
@@ -265,7 +276,20 @@ class Mission:
 
     def _trace(self, ctx: PlanContext) -> tuple[Waypoint, ...]:
         wanted = self._declaring.waypoints(ctx, self._routing, self._frame)
-        return self._routing.route(self.planner, ctx) if wanted is None else wanted
+        if wanted is not None:
+            return wanted
+        return self._routing.route(self.planner, replace(ctx, goal=self._trace_goal(ctx.goal)))
+
+    def _trace_goal(self, greatest: int) -> int:
+        """``greatest``, the map's greatest cell, unless it lies more than ``TRACE_SLACK_M`` downflow
+        of the last detection: then the greatest of the cells that do not."""
+        if self._last_detection is None or self._frame is None:
+            return greatest
+        _, x, y = self._last_detection
+        upflow = upflow_cells(self.grid, self._frame, x, y, TRACE_SLACK_M)
+        if upflow.flat[greatest] or not upflow.any():
+            return greatest
+        return int(np.argmax(np.where(upflow, self.mapper.likelihood, -1.0)))
 
     _BEHAVIOUR: ClassVar[dict[MissionState, Callable[[Mission, PlanContext], tuple[Waypoint, ...]]]] = {
         MissionState.FIND: _find,

@@ -12,10 +12,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from service.core.planning.base import Waypoint
 
 if TYPE_CHECKING:
     from service.core.grid import Grid
+    from service.core.planning.base import BoolArray
 
 CALM_MPS = 1e-6
 """Below this flow speed there is no flow direction; ``FlowFrame.from_flow`` uses the fallback."""
@@ -53,6 +56,13 @@ class FlowFrame:
         """Unsigned angle between two flow directions, radians."""
         dot = max(-1.0, min(1.0, self.ux * other.ux + self.uy * other.uy))
         return math.acos(dot)
+
+
+def upflow_cells(grid: Grid, frame: FlowFrame, x: float, y: float, slack_m: float) -> BoolArray:
+    """The cells whose centres lie at most ``slack_m`` downflow of (x, y) along the flow, shape (n, m)."""
+    along = (grid.x_centres[np.newaxis, :] - x) * frame.ux + (grid.y_centres[:, np.newaxis] - y) * frame.uy
+    out: BoolArray = along <= slack_m
+    return out
 
 
 def upflow_until(

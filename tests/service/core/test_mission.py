@@ -27,6 +27,7 @@ from service.core.mission import (
     SourceDeclared,
 )
 from service.core.mission.declaring import PROBE_REACH, RESMELL_WAIT_S
+from service.core.mission.mission import TRACE_SLACK_M
 from service.core.observation import Observation
 from service.core.planning import PLANNERS
 from service.core.planning.base import VehicleState, Waypoint
@@ -235,8 +236,10 @@ def test_reaches_the_estimate_whenever_a_path_exists() -> None:
         x, y = grid.centre(start[0] * grid.columns + start[1])
         vehicle = Vehicle(x, y)
         visited: set[int] = set()
+        gx, gy = grid.centre(goal)
         for t in range(2 * grid.size + 2):
-            obs = Observation(float(t), vehicle.x, vehicle.y, 0.3, 0.1, True)
+            # odour at the estimate: the trace's goal is the estimate itself (TRACE_SLACK_M)
+            obs = Observation(float(t), gx, gy, 0.3, 0.1, True)
             out = mission.step(obs, vehicle.state)
             assert mission.state is MissionState.TRACE
             vehicle.follow(out.waypoints)
@@ -406,7 +409,8 @@ def test_unreachable_estimate_is_handled_without_error() -> None:
     mission = Mission(grid, mapper, PAPERS_PLANNING, NEVER)
     vehicle = Vehicle(5.0, -45.0)
     for t in range(60):
-        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, 0.0, 1.0, t == 0), vehicle.state)
+        # a flow toward the West: the pocket lies upflow of the odour met at the start
+        out = mission.step(Observation(float(t), vehicle.x, vehicle.y, -1.0, 0.0, t == 0), vehicle.state)
         vehicle.follow(out.waypoints)
         vehicle.move()
     here = grid.cell_of(vehicle.x, vehicle.y)
@@ -945,3 +949,45 @@ def test_odour_at_the_estimate_however_steady_is_checked_first(hits: list[bool],
     assert out.waypoints is not None  # to the check's first turning point: 3 m upflow, 6 m aside
     sx, sy = AREA.centre(SOURCE)
     assert math.hypot(out.waypoints[0].x - sx, out.waypoints[0].y - sy) == pytest.approx(math.hypot(3.0, 6.0))
+
+
+def two_peaks(mapper: ScriptedMapper, greatest: int, second: int) -> None:
+    pi = np.full(AREA.shape, 1e-4)
+    pi.flat[greatest], pi.flat[second] = 0.5, 0.2
+    mapper.set(pi)
+
+
+def test_the_trace_goal_stays_upflow_of_the_last_odour() -> None:
+    """A map whose greatest cell lies 40 m downflow of the odour (where no observation reached) sends
+    the trace to its greatest cell upflow of the odour instead, in trace and in lost."""
+    mapper = ScriptedMapper(AREA)
+    downflow, upflow = AREA.cell_of(90.0, 0.0), AREA.cell_of(30.0, 0.0)
+    two_peaks(mapper, downflow, upflow)
+    mission = mission_with(mapper, probability=1.0, hmm_probability=1.0, upflow_pass_m=1e9)
+    v = VehicleState(50.0, 0.5)
+    mission.step(Observation(0.0, v.x, v.y, 1.0, 0.0, False), v)
+    out = mission.step(Observation(1.0, v.x, v.y, 1.0, 0.0, True), v)
+    assert mission.state is MissionState.TRACE
+    assert mission.mapper.estimate().cell == AREA.paper_number(downflow)  # the published estimate stays
+    assert out.waypoints is not None
+    assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(upflow)
+    downflow, upflow = AREA.cell_of(95.0, -10.0), AREA.cell_of(35.0, 10.0)  # the misses moved both
+    two_peaks(mapper, downflow, upflow)
+    out = mission.step(Observation(12.0, v.x, v.y, 1.0, 0.0, False), v)
+    assert mission.state is MissionState.LOST
+    assert out.waypoints is not None
+    assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(upflow)
+
+
+def test_a_trace_goal_just_downflow_of_the_odour_is_kept() -> None:
+    """Within TRACE_SLACK_M downflow of the odour (2.5 m here) the greatest cell is the goal."""
+    mapper = ScriptedMapper(AREA)
+    near, upflow = AREA.cell_of(52.0, 2.0), AREA.cell_of(30.0, 0.0)
+    assert AREA.centre(near)[0] - 50.0 <= TRACE_SLACK_M
+    two_peaks(mapper, near, upflow)
+    mission = mission_with(mapper, probability=1.0, hmm_probability=1.0, upflow_pass_m=1e9)
+    v = VehicleState(50.0, 0.5)
+    mission.step(Observation(0.0, v.x, v.y, 1.0, 0.0, False), v)
+    out = mission.step(Observation(1.0, v.x, v.y, 1.0, 0.0, True), v)
+    assert out.waypoints is not None
+    assert (out.waypoints[-1].x, out.waypoints[-1].y) == AREA.centre(near)

@@ -1,8 +1,11 @@
+import math
+
+import numpy as np
 import pytest
 
 from service.core.grid import Grid
 from service.core.planning.base import Waypoint
-from service.core.planning.crossflow import FlowFrame, pass_across, upflow_until
+from service.core.planning.crossflow import FlowFrame, pass_across, upflow_cells, upflow_until
 
 GRID = Grid(0.0, 20.0, 0.0, 10.0, columns=10, rows=5)  # 2 x 2 m cells: half-cell steps of 1 m
 EAST = FlowFrame(1.0, 0.0)  # upflow is toward -x
@@ -35,3 +38,14 @@ def test_a_pass_across_the_flow_is_clipped_to_the_cell_centres() -> None:
     assert pass_across(GRID, 1.0, 5.0, north, 3.0) == (Waypoint(1.0, 5.0), Waypoint(4.0, 5.0))
     with pytest.raises(ValueError, match="positive"):
         pass_across(GRID, 9.0, 5.0, EAST, 0.0)
+
+
+def test_the_cells_upflow_of_a_point_take_the_slack_downflow() -> None:
+    # flow East: columns centred at x = 1, 3, ..., 19; from x = 10 with 1.5 m slack, x <= 11.5
+    assert upflow_cells(GRID, EAST, 10.0, 5.0, 1.5).tolist() == [[True] * 6 + [False] * 4] * 5
+    # flow North-East: a cell's along-flow coordinate is (x - 10 + y - 5) / sqrt(2)
+    north_east = FlowFrame(math.sqrt(0.5), math.sqrt(0.5))
+    mask = upflow_cells(GRID, north_east, 10.0, 5.0, 0.0)
+    xs, ys = np.meshgrid(GRID.x_centres, GRID.y_centres)
+    assert (mask == (xs + ys <= 15.0)).all()
+    assert mask.shape == GRID.shape
