@@ -265,8 +265,8 @@ RETIRED_KEYS = {
     "planning.cast_legs": _NO_CAST,
     "planning.flat_map_ratio": "removed: it never changed a mission of the world suite; delete the key",
     "mapping.drift_spread": "removed: the suite's missions came out the same without the drift error "
-    "(docs/search-benchmark.md, step 26); delete the key",
-    "declaration.persist_s": "removed: the check across the flow does what it did (docs/search-benchmark.md, "
+    "(docs/search-steps.md, step 26); delete the key",
+    "declaration.persist_s": "removed: the check across the flow does what it did (docs/search-steps.md, "
     "step 26); delete the key",
     "planning.zigzag_spacing_m": _NO_ZIGZAG,
     "planning.zigzag_near_edge_spacings": _NO_ZIGZAG,

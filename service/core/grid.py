@@ -228,7 +228,7 @@ splitting: 1.25 x 1 m on the default area): about the width of a plume a few met
 source. In cells much wider than the plume a vehicle standing upflow of the source but inside its
 cell misses odour the model promised there, and the map cannot hold the source; in cells as wide
 as the detector's footprint a source on the boundary of two cells leaves a vehicle at either
-centre beside the plume (docs/search-benchmark.md, steps 4 and 22)."""
+centre beside the plume (docs/search-steps.md, steps 4 and 22)."""
 MODEL_CELLS_MAX = 10_000
 """The model grid is split no further than this many cells (``oslim bench mapping``'s target size)."""
 

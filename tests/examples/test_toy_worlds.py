@@ -24,7 +24,7 @@ def test_worlds_are_solved_and_a_slow_one_is_not_named_wrongly() -> None:
     toy = _load()
     # world 5: found at 81 s (79 s before the check waited for odour back at the cell, 77 s before
     # it flew its nearer side first); world 15: found only at 578 s (519 s before the trace's goal
-    # was kept upflow of the odour, step 43 of docs/search-benchmark.md; 546 s with the checks'
+    # was kept upflow of the odour, step 43 of docs/search-steps.md; 546 s with the checks'
     # tally, before step 39; 479 s before the wait; with one plume in the model, step 29, nothing
     # was declared in 600 s: a failure, not a wrong place)
     assert toy.toy_mission(5, []) == (81.0, True)

@@ -17,7 +17,7 @@ A point detector with a growing footprint (ours, off by default): the papers cou
 smelt when it lies anywhere in the vehicle's cell. A source in the vehicle's own cell then always has
 this tick's filament there, and each detection favours that cell over a source upflow, whose
 filaments have spread; the detector does the opposite, since a plume is narrow at its source and
-wider downflow (docs/search-benchmark.md, step 18). With ``footprint_m`` = r0 > 0 the detector sits
+wider downflow (docs/search-steps.md, step 18). With ``footprint_m`` = r0 > 0 the detector sits
 at the vehicle's position and smells a filament of age tau within
 
     r(tau) = sqrt(r0^2 + g tau)                                             (footprint eq. F1)
@@ -117,7 +117,7 @@ def merged_steps(
     release over time. Old filaments have spread far more than the flow moves them in a tick, so
     neighbouring ones are nearly the same filament and a coarser quadrature gives the same
     chances: with runs at most half a spread long, P(detection) stays within 1 % (tested at 0.3
-    and 1 m/s) while a 0.3 m/s flow's 420 prehistoric releases become 90 (docs/search-benchmark.md,
+    and 1 m/s) while a 0.3 m/s flow's 420 prehistoric releases become 90 (docs/search-steps.md,
     step 31).
 
         run of step k = floor(sum_{j<=k} step_m / (PREHISTORY_MERGE sigma sqrt(lag_j)))   (eq. R1)

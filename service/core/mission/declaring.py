@@ -8,7 +8,7 @@ is flown and odour has been met at the cell again; odour found upflow of the est
 estimate, calls it off, and so does no odour at the cell for ``RESMELL_WAIT_S`` after the pass.
 A source keeps releasing, so a plume stays anchored at it: coming back to the cell after the pass
 meets its odour within seconds, while the end of a plume swung aside by a meander has usually
-moved on by then (docs/search-benchmark.md, step 37). A call-off is not remembered: a pass that
+moved on by then (docs/search-steps.md, step 37). A call-off is not remembered: a pass that
 happens to miss a patchy plume upflow of a false end still needs odour back at the false end,
 which a plume swung aside does not give (a tally that asked a cell with a call-off for more clean
 passes than called-off ones gained nothing once the odour back was asked for: step 39). A plume that
@@ -64,7 +64,7 @@ PROBE_REACH = 3
 """The probe at the estimate chooses among the cells within this many rows and columns of the
 vehicle's (a few ticks away: 3.75 x 3 m on the default area's 1.25 x 1 m model cells), and the
 first free cell upflow beyond an obstacle. Two such cells kept a vehicle in a sparse plume probing
-within 2 m of a false end, which its upflow check then missed (docs/search-benchmark.md, step 22)."""
+within 2 m of a false end, which its upflow check then missed (docs/search-steps.md, step 22)."""
 
 
 @dataclass
@@ -102,7 +102,7 @@ class Check:
 
         The way back is a second crossing of the line: a sparse plume lies under a crossing vehicle
         for a few ticks only, and one crossing of a plume present in 40 % of the seconds misses it
-        in 3 ticks one time in five (docs/search-benchmark.md, step 23)."""
+        in 3 ticks one time in five (docs/search-steps.md, step 23)."""
         upflow = config.check_upflow_m
         clear = upflow_until(grid, found.x, found.y, frame, upflow, lambda x, y: not grid.in_obstacle(x, y))
         ax, ay = clear if clear is not None else (found.x - upflow * frame.ux, found.y - upflow * frame.uy)
@@ -371,7 +371,7 @@ class Declaring:
         became the estimate (``upflow_pass_m``; none configured, none named), no odour has been met
         ``check_upflow_m / 2`` or more upflow of it since (what calls a check off), and
         ``final_probability`` of the map lies within ``radius_m`` of it (its stated confidence).
-        None otherwise (docs/search-benchmark.md, step 40)."""
+        None otherwise (docs/search-steps.md, step 40)."""
         cell = int(np.argmax(likelihood))
         declarer = self._declarer
         if declarer.cell != cell or not declarer.passed_upflow or declarer.odour_upflow:

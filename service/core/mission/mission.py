@@ -12,7 +12,7 @@ tracing, and source declaration". The states, and the behaviour that flies each:
 - ``LOST``: no detection for ``lost_after_s`` while tracing; the vehicle flies on as in
   ``TRACE``, toward the map's greatest cell upflow of the last odour, whose map holds the misses
   since (a cast across the flow around the last detection was measured and deleted:
-  docs/search-benchmark.md, step 15). A detection returns to ``TRACE``.
+  docs/search-steps.md, step 15). A detection returns to ``TRACE``.
   With ``lone_contact_hits`` > 0, a contact met in ``FIND`` with at most that many detections is
   lost after ``lone_contact_lost_after_s`` instead, and goes back to ``FIND`` (a new leg from
   where it stopped, chosen by the map that now holds the contact): a false alarm (the
@@ -72,7 +72,7 @@ TRACE_SLACK_M = 3.0
 """The trace's goal lies at most this far downflow of the last detection, along the mean flow: a
 source lies upflow of its odour, give or take the mean flow's direction and a cell. A map that has
 given the plume up keeps its mass where no observation reached, often on the downflow edge, and
-its greatest cell there would send the vehicle away from the plume (docs/search-benchmark.md,
+its greatest cell there would send the vehicle away from the plume (docs/search-steps.md,
 steps 36 and 43)."""
 
 
@@ -154,7 +154,7 @@ class Mission:
     def restore_state(self, state: dict[str, Any]) -> None:
         """Continue in the phase ``save_state`` saved; a leg is laid out anew,
         and past the first detection the declaration rule is re-armed from the restored map. A
-        snapshot's ``check_passes`` (the checks' tally, before step 39 of docs/search-benchmark.md)
+        snapshot's ``check_passes`` (the checks' tally, before step 39 of docs/search-steps.md)
         is ignored; one without ``started_s`` counts the endurance from the next tick. The upflow
         pass and the odour upflow of the estimate are not saved: after a restart the endurance names
         a cell only once its upflow pass is made again."""

@@ -11,7 +11,7 @@ the vehicle and the estimate's centre the planner flies that straight leg instea
 shortest way in the plane, and the grid's shortest paths are staircases that may put all their
 diagonal moves first (a diagonal runs 39 degrees off the x axis on the default area's 1.25 x 1 m
 model cells), so that a vehicle re-planning toward an estimate upflow first drifts across the
-flow, out of the plume (docs/search-benchmark.md, steps 21 and 24).
+flow, out of the plume (docs/search-steps.md, steps 21 and 24).
 
 ``astar-paper`` is the paper's own: a node is a cell entered with a heading, and from it only
 the five moves relative to that heading (left, left-forward, forward, right-forward, right) are

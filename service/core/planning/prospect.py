@@ -46,7 +46,7 @@ if TYPE_CHECKING:
 TRACE_COST = 8.0
 """What a metre between a contact and its source costs, in metres flown: tracing weaves and waits
 for odour, and the farther downflow the contact the likelier the plume is lost on the way. Chosen
-on the suite's seeds 0-19: 2, 4 and 8 made 140, 153 and 155 of 260 (docs/search-benchmark.md)."""
+on the suite's seeds 0-19: 2, 4 and 8 made 140, 153 and 155 of 260 (docs/search-steps.md)."""
 TURN_COST_M = 10.0
 """Distance a new leg is charged besides its length (slowing, turning, settling on the line)."""
 CANDIDATE_SPACING_M = 10.0

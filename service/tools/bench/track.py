@@ -6,7 +6,7 @@ mission's state, where the map put the source, the share of the map that cell ho
 within the declaration's radius of it (what the rule waits for). Positions are along and across
 the world's mean flow from the true source, along > 0 downflow of it, so that a map sitting on a
 contact downflow of the source, or a crossing of the source's line far downflow without odour,
-reads at a glance (docs/search-benchmark.md, step 42).
+reads at a glance (docs/search-steps.md, step 42).
 """
 
 from __future__ import annotations

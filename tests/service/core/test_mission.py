@@ -686,7 +686,7 @@ def test_a_cell_whose_odour_does_not_come_back_after_the_check_is_not_declared()
 
 
 def test_a_snapshot_with_the_old_checks_tally_is_restored_without_it() -> None:
-    # before step 39 of docs/search-benchmark.md the snapshot kept the checks' tally
+    # before step 39 of docs/search-steps.md the snapshot kept the checks' tally
     # ("check_passes"); a service restarted on such a snapshot ignores it
     mapper, mission, vehicle, _ = start_check()
     sx, sy = AREA.centre(SOURCE)

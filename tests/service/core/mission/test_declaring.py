@@ -203,7 +203,7 @@ def flown_clean(declaring: Declaring, t: float) -> SourceDeclared | Check | None
 
 def test_after_a_pass_called_off_by_odour_upflow_one_clean_pass_declares_the_cell() -> None:
     # a call-off is not remembered: the odour back at the cell that a clean pass needs is what a
-    # false end lacks (docs/search-benchmark.md, step 39)
+    # false end lacks (docs/search-steps.md, step 39)
     declaring = Declaring(AREA, CONFIG, None)
     declaring.arm(0.0, peaked())
     assert isinstance(declaring.judge(odour(0.0, SX, SY), peaked(), EAST), Check)

@@ -56,7 +56,7 @@ def test_json_gives_a_row_per_class_then_the_summary(capsys: pytest.CaptureFixtu
 @pytest.mark.slow
 def test_the_suite_keeps_its_held_out_figures(capsys: pytest.CaptureFixture[str]) -> None:
     """20 missions per class on held-out seeds: what the default reached when this was written
-    (docs/search-benchmark.md, step 2), with room for the noise of 20 seeds. A guard against
+    (docs/search-steps.md, step 2), with room for the noise of 20 seeds. A guard against
     regressions, not the issue's goal."""
     assert main(["bench", "suite", "--runs", "20", "--first-seed", "20000", "--jobs", "2", "--json"]) == 0
     rows = _rows(capsys)
