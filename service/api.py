@@ -122,7 +122,9 @@ class Search:
             admit = lambda cell: user_admit(self.grid.cell_of(*self.model_grid.centre(cell)))  # noqa: E731
         self._mission = Mission.from_config(config, self.model_grid, self._mapper, admit=admit)
         self._aggregator = TickAggregator(
-            config.sensor.threshold, max_position_age_s=2.0 * config.mapping.tick_s
+            config.sensor.threshold,
+            max_position_age_s=2.0 * config.mapping.tick_s,
+            response_s=config.sensor.response_s,
         )
         self._gaps: tuple[str, ...] = ()
         self._lead = Lead(self.model_grid)

@@ -13,6 +13,12 @@ mu is a per-observation probability and the service observes once per mapping ti
 reading over the tick, seed hmm-plume-mapping §III-A), so the sensitive / blind state is drawn
 once per ``hold_s`` (one tick) rather than per reading: independent draws at 10 Hz would make
 the per-tick detection probability far higher than mu.
+
+A real sensor is not instantaneous: with ``response_s`` > 0 it reads the concentration through a
+first-order lag of that time constant (the time to 63 % of a step), so a brief filament reads
+weaker and a reading goes on after the vehicle has left the odour. A blind spell then stops odour
+entering the lag (the reading decays) instead of zeroing the reading. 0 (the default) is the
+instantaneous sensor of the papers. ``noise_std`` adds white noise to every reading.
 """
 
 from __future__ import annotations
@@ -35,6 +41,10 @@ class DetectorParams:
     """Mean number of false alarms per second of simulated time."""
     hold_s: float = 1.0
     """How long one sensitive / blind draw lasts (the service's mapping tick)."""
+    response_s: float = 0.0
+    """Time constant of the sensor's first-order lag, s; 0 = instantaneous."""
+    noise_std: float = 0.0
+    """White noise on every reading, in the threshold's units; 0 = none."""
 
     def __post_init__(self) -> None:
         bad = []
@@ -46,6 +56,10 @@ class DetectorParams:
             bad.append("false_alarm_rate_hz")
         if not (math.isfinite(self.hold_s) and self.hold_s > 0):
             bad.append("hold_s")
+        if not (math.isfinite(self.response_s) and self.response_s >= 0):
+            bad.append("response_s")
+        if not (math.isfinite(self.noise_std) and self.noise_std >= 0):
+            bad.append("noise_std")
         if bad:
             raise ConfigError(f"detector parameters out of range: {', '.join(bad)}")
 
@@ -59,6 +73,8 @@ class BinaryDetector:
         self._sensitive = self._draw_sensitive()
         self._until_redraw_s = params.hold_s
         self._pending_false_alarms = 0
+        self._sensed = 0.0
+        self._noise_rng = rng.spawn(1)[0]  # its own stream: noise leaves the misses as they were
 
     def _draw_sensitive(self) -> bool:
         return bool(self._rng.random() < self.params.detection_probability)
@@ -77,9 +93,25 @@ class BinaryDetector:
         if self.params.false_alarm_rate_hz > 0:
             self._pending_false_alarms += int(self._rng.poisson(self.params.false_alarm_rate_hz * dt_s))
 
+    @property
+    def lags(self) -> bool:
+        """Whether the sensor must be fed the concentration at every step (``sense``)."""
+        return self.params.response_s > 0
+
+    def sense(self, concentration: float, dt_s: float) -> None:
+        """Feed the lag the concentration at the sensor over the last ``dt_s`` (none while blind)."""
+        entering = concentration if self._sensitive else 0.0
+        self._sensed += (entering - self._sensed) * -math.expm1(-dt_s / self.params.response_s)
+
     def read(self, concentration: float) -> float:
-        """The reading reported for a true concentration; thresholding it gives the detection."""
+        """The reading reported for a true concentration; thresholding it gives the detection.
+        A lagging sensor reports what ``sense`` has accumulated instead."""
         reading = concentration if self._sensitive else 0.0
+        if self.lags:  # blind spells kept odour out of the lag instead
+            reading = self._sensed
+        if self.params.noise_std > 0:
+            noise = float(self._noise_rng.standard_normal())
+            reading += self.params.noise_std * self.params.threshold * noise
         if self._pending_false_alarms:
             self._pending_false_alarms -= 1
             reading = max(reading, self.params.threshold)

@@ -22,7 +22,8 @@ What is drawn, and from what (defaults: the *base world*; a class changes what d
 - plume: how long the source has been releasing when the mission starts (developed: 300-900 s;
   the young-plume class 0-60 s), release rate, puff growth and random walk;
 - detector: the concentration scale relative to the service's threshold (``puff_mass`` is in
-  units of ``sensor.threshold``), mu and false alarms;
+  units of ``sensor.threshold``), mu, false alarms, a response time and reading noise (neither in the
+  suite; a slow sensor's service is told its time, as a user sets ``sensor.response_s``);
 - flow sensor: noise and a direction bias of a few degrees;
 - vehicle: speed, and rover (turns on the spot) or AUV kinematics (cannot; slows in turns).
 """
@@ -132,6 +133,13 @@ class PlumeRanges(_Spec):
 class DetectorRanges(_Spec):
     detection_probability: Range = (0.8, 1.0)
     false_alarm_rate_hz: Range = (0.0, 0.002)
+    response_s: Range = (0.0, 0.0)
+    """The sensor's first-order time constant; the suite's sensors are instantaneous."""
+    noise_std: Range = (0.0, 0.0)
+    """White noise on every reading, in units of the threshold; the suite's readings have none."""
+    response_told: Range = (1.0, 1.0)
+    """A slow sensor's service is configured with ``sensor.response_s`` = its drawn time constant
+    times this: 1 for a user who set the datasheet's value, 0 for one who left the default."""
 
 
 class FlowSensorRanges(_Spec):
@@ -370,7 +378,7 @@ def draw_scenario(world_class: WorldClass, seed: int, config: Config | None = No
     auv = kind is VehicleKind.SUB
     plume = spec.plume
     spin_up_s = draw.value(plume.spin_up_s)
-    world = {
+    world: dict[str, Any] = {
         "seed": seed,
         "dt_s": 0.1,
         "source": {"position_m": list(source)},
@@ -404,6 +412,11 @@ def draw_scenario(world_class: WorldClass, seed: int, config: Config | None = No
             "bias_deg": draw.value(spec.flow_sensor.bias_deg),
         },
     }
+    # drawn last, so that a fixed response leaves every other draw of the seed as it was
+    response_s = draw.value(spec.detector.response_s)
+    world["detector"]["response_s"] = response_s
+    told_s = response_s * draw.value(spec.detector.response_told)
+    world["detector"]["noise_std"] = draw.value(spec.detector.noise_std)
     service = base.model_copy(
         update={
             "area": base.area.model_validate({**area, "obstacles": obstacles}),
@@ -411,6 +424,8 @@ def draw_scenario(world_class: WorldClass, seed: int, config: Config | None = No
             "vehicle": base.vehicle.model_copy(update={"id": world_class.name}),
         }
     )
+    if response_s > 0:  # the user configures the sensor the vehicle carries
+        service = service.model_copy(update={"sensor": base.sensor.model_copy(update={"response_s": told_s})})
     try:
         world_spec = WorldSpec.model_validate(world, strict=False)
     except ValidationError as exc:  # a class whose ranges reach outside what a world accepts

@@ -147,6 +147,10 @@ class DetectorSpec(_Spec):
     detection_probability: float = Field(default=1.0, gt=0, le=1)
     false_alarm_rate_hz: float = Field(default=0.0, ge=0)
     hold_s: float = Field(default=1.0, gt=0)
+    response_s: float = Field(default=0.0, ge=0)
+    """Time constant of the sensor's first-order lag, s; 0 = instantaneous."""
+    noise_std: float = Field(default=0.0, ge=0)
+    """White noise on every reading, in units of the threshold."""
 
 
 class FlowSensorSpec(_Spec):
@@ -434,6 +438,8 @@ def build_world(scenario: Scenario, seed: int | None = None) -> World:
         detection_probability=d.detection_probability,
         false_alarm_rate_hz=d.false_alarm_rate_hz,
         hold_s=d.hold_s,
+        response_s=d.response_s,
+        noise_std=d.noise_std,
     )
     v = world.vehicle
     flow = _flow(world.flow, placement.mean_flow_mps, flow_rng)

@@ -65,6 +65,8 @@ class World:
         self.vehicle = kinematics.step(before, target, self.vehicle_params, dt, self.obstacles)
         self.distance_m += math.hypot(self.vehicle.x_m - before.x_m, self.vehicle.y_m - before.y_m)
         self.flow.advance(dt)
+        if self.detector.lags:
+            self.detector.sense(self.concentration_at_vehicle(), dt)
         self.detector.advance(dt)
         self._steps += 1
 

@@ -97,6 +97,7 @@ class SensorConfig(_Section):
     detection_probability: float = Field(default=0.9, gt=0, le=1)
     false_alarm_probability: float = Field(default=0.02, ge=0, lt=1)
     miss_floor: float = Field(default=0.3, ge=0, lt=1)
+    response_s: float = Field(default=0.0, ge=0, le=60)
     detection_name: str = Field(default="CHEM_DET", min_length=1, max_length=10)
     max_flow_mps: float = Field(default=20.0, gt=0)
 

@@ -68,6 +68,24 @@ def test_a_class_takes_world_overrides_only() -> None:
         load_class(CLASSES["steady"], ["mapping.method=bayes"])
 
 
+def test_a_slow_sensor_changes_no_other_draw() -> None:
+    # the response time is drawn last: the same seed draws the same world besides it
+    plain = draw_scenario(load_class(CLASSES["meander"]), 3).scenario.world
+    slow = draw_scenario(
+        load_class(CLASSES["meander"], ["world.detector.response_s=[1.0, 2.0]"]), 3
+    ).scenario.world
+    assert plain.detector.response_s == 0.0
+    told = draw_scenario(load_class(CLASSES["meander"], ["world.detector.response_s=2.0"]), 3).scenario.config
+    untold = ["world.detector.response_s=2.0", "world.detector.response_told=0"]
+    assert told.sensor.response_s == 2.0
+    assert draw_scenario(load_class(CLASSES["meander"], untold), 3).scenario.config.sensor.response_s == 0.0
+    assert 1.0 <= slow.detector.response_s <= 2.0
+    assert slow.model_copy(update={"detector": plain.detector}) == plain
+    assert build_world(
+        draw_scenario(load_class(CLASSES["meander"], ["world.detector.response_s=1.5"]), 3).scenario, 3
+    ).detector.lags
+
+
 def _signature(world_class: WorldClass, seed: int) -> tuple[object, ...]:
     drawn = draw_scenario(world_class, seed)
     world = build_world(drawn.scenario, seed)

@@ -1,3 +1,6 @@
+import math
+
+import numpy as np
 import pytest
 
 from service.core.observation import Observation
@@ -87,3 +90,63 @@ def test_local_position_preferred_over_global() -> None:
     obs = agg.close(4.0).observation
     assert obs is not None
     assert (obs.x, obs.y) == (50.0, 60.0)
+
+
+def test_a_slow_sensors_readings_are_turned_back_into_what_it_met() -> None:
+    # tau = 0.4 s, readings every 0.2 s (half the time constant apart). A filament of 1.5 units met
+    # for 0.2 s reads only 1.5 (1 - exp(-0.5)) = 0.59, below the threshold of 1; inverted, 1.5
+    tau, dt = 0.4, 0.2
+    gain = 1.0 - math.exp(-dt / tau)
+    agg = TickAggregator(threshold=1.0, response_s=tau)
+    agg.add(Position(0.0, 0.0, 0.0))
+    agg.add(FlowSample(0.0, 1.0, 0.0))
+    agg.add(ChemSample(0.0, 0.0))
+    agg.add(ChemSample(dt, 1.5 * gain))
+    obs = agg.close(0.5).observation
+    assert obs is not None
+    assert obs.detected
+    # odour held at 5 brings the reading to 4; then the vehicle leaves it and the reading
+    # decays, still at or above the threshold in the next tick's first readings: nothing met there
+    agg.add(ChemSample(0.4, 4.0 - gain))
+    agg.add(ChemSample(0.6, 4.0))
+    agg.add(FlowSample(0.6, 1.0, 0.0))
+    obs = agg.close(0.6).observation
+    assert obs is not None
+    assert obs.detected
+    readings = [4.0 * math.exp(-k * dt / tau) for k in range(1, 5)]
+    assert sum(r >= 1.0 for r in readings) == 2
+    for k, reading in enumerate(readings, start=1):
+        agg.add(ChemSample(0.6 + k * dt, reading))
+    agg.add(FlowSample(1.0, 1.0, 0.0))
+    obs = agg.close(1.5).observation
+    assert obs is not None
+    assert not obs.detected
+
+
+def test_the_inversion_does_not_turn_a_slow_sensors_noise_into_odour() -> None:
+    # tau = 2 s, readings at 5 Hz with noise of 0.1 of the threshold and no odour. Inverted over
+    # 0.2 s the noise would be about 13 times as large (a false detection in most ticks); over
+    # tau / 2 it is about 3 times, 0.3 of the threshold
+    rng = np.random.default_rng(7)
+    agg = TickAggregator(threshold=1.0, response_s=2.0)
+    detections = 0
+    for tick in range(1, 1001):
+        agg.add(Position(float(tick), 0.0, 0.0))
+        agg.add(FlowSample(float(tick), 1.0, 0.0))
+        for k in range(5):
+            agg.add(ChemSample(tick - 1 + 0.2 * (k + 1), 0.1 * float(rng.standard_normal())))
+        obs = agg.close(float(tick)).observation
+        assert obs is not None
+        detections += obs.detected
+    assert detections < 10
+
+
+def test_an_instantaneous_sensors_readings_are_taken_as_they_come() -> None:
+    agg = TickAggregator(threshold=1.0)
+    agg.add(Position(0.2, 1.0, 0.0))
+    agg.add(FlowSample(0.5, 1.0, 0.0))
+    agg.add(ChemSample(0.5, 0.0))
+    agg.add(ChemSample(0.7, 0.9))
+    obs = agg.close(1.0).observation
+    assert obs is not None
+    assert not obs.detected
