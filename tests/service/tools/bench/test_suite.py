@@ -325,3 +325,21 @@ def test_a_suite_mission_knows_its_vehicle_speed() -> None:
     drawn = suite.drawn_world(suite.SuiteMission(steady, 0))
     result, _ = suite.run_suite_mission(suite.SuiteMission(steady, 0, time_scale=0.02))
     assert result.vehicle_speed_mps == drawn.scenario.world.vehicle.speed_mps
+
+
+def test_a_slow_sensor_is_found_when_its_service_is_told_its_time_constant() -> None:
+    """A sensor with a 1.6 s time constant in wang-laminar (seed 1): its reading's tail after the
+    laminar plume places odour upflow of the source, where the check calls the source off, unless
+    ``sensor.response_s`` inverts the lag (docs/search-steps.md, step 45)."""
+    laminar = str(next(path for path in suite.suite_classes() if path.stem == "wang-laminar"))
+    slow = ("world.detector.response_s=1.6",)
+    told, _ = suite.run_suite_mission(suite.SuiteMission(laminar, 1, overrides=slow))
+    untold, _ = suite.run_suite_mission(
+        suite.SuiteMission(laminar, 1, overrides=(*slow, "world.detector.response_told=0"))
+    )
+    assert told.failure is None
+    assert told.check == "flown"
+    assert told.time_s < 120.0
+    # untold, no check vouched for the source before the time ran out (at best the endurance named it)
+    assert untold.check != "flown"
+    assert untold.time_s == 300.0
