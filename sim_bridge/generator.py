@@ -25,7 +25,8 @@ What is drawn, and from what (defaults: the *base world*; a class changes what d
   units of ``sensor.threshold``), mu, false alarms, a response time and reading noise (neither in the
   suite; a slow sensor's service is told its time, as a user sets ``sensor.response_s``);
 - flow sensor: noise and a direction bias of a few degrees;
-- vehicle: speed, and rover (turns on the spot) or AUV kinematics (cannot; slows in turns).
+- vehicle: speed, and rover (turns on the spot) or AUV kinematics (cannot; slows in turns), and a
+  position error of the autopilot's (none in the suite).
 """
 
 from __future__ import annotations
@@ -150,6 +151,10 @@ class FlowSensorRanges(_Spec):
 class VehicleRanges(_Spec):
     kinds: tuple[VehicleKind, ...] = Field(default=(VehicleKind.ROVER, VehicleKind.SUB), min_length=1)
     speed_mps: Range = (0.5, 2.0)
+    position_error_m: Range = (0.0, 0.0)
+    """The autopilot's position error (each axis's standard deviation); the suite's is perfect."""
+    position_error_s: Range = (60.0, 60.0)
+    """Its correlation time, s."""
 
 
 class WorldRanges(_Spec):
@@ -417,6 +422,8 @@ def draw_scenario(world_class: WorldClass, seed: int, config: Config | None = No
     world["detector"]["response_s"] = response_s
     told_s = response_s * draw.value(spec.detector.response_told)
     world["detector"]["noise_std"] = draw.value(spec.detector.noise_std)
+    world["vehicle"]["position_error_m"] = draw.value(spec.vehicle.position_error_m)
+    world["vehicle"]["position_error_s"] = draw.value(spec.vehicle.position_error_s)
     service = base.model_copy(
         update={
             "area": base.area.model_validate({**area, "obstacles": obstacles}),

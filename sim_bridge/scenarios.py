@@ -29,6 +29,7 @@ from sim_bridge.autopilot import AUTOPILOTS, VehicleKind
 from sim_bridge.detector import BinaryDetector, DetectorParams
 from sim_bridge.flow import FlowField, MeanderingFlow, SwitchedFlow, TurbulentFlow, UniformFlow
 from sim_bridge.flow_sensor import FlowSensor, FlowSensorParams
+from sim_bridge.navigation import Navigation, NavigationParams
 from sim_bridge.plume import PuffParams, PuffPlume
 from sim_bridge.vehicle import VehicleParams, VehicleState
 from sim_bridge.world import World
@@ -133,6 +134,10 @@ class VehicleSpec(_Spec):
     """AUV kinematics: no turning on the spot (set pivot_angle_deg = 180), slower in turns."""
     arrival_radius_m: float = Field(default=0.0, ge=0, le=50)
     """The autopilot stops this far short of a target (ArduPilot's WP_RADIUS); 0: on it."""
+    position_error_m: float = Field(default=0.0, ge=0, le=50)
+    """Standard deviation of each axis of the autopilot's position error, m (``navigation``)."""
+    position_error_s: float = Field(default=60.0, gt=0)
+    """Correlation time of that error, s."""
 
     @model_validator(mode="after")
     def _one_of(self) -> Self:
@@ -376,10 +381,10 @@ def place(scenario: Scenario, seed: int | None = None) -> Placement:
 
 
 def _streams(scenario: Scenario, seed: int | None) -> list[np.random.Generator]:
-    # independent child streams: placement, flow, plume, detector, flow sensor; changing one leaves
-    # the others alone (and a stream added at the end leaves the earlier ones as they were)
+    # independent child streams: placement, flow, plume, detector, flow sensor, navigation; changing
+    # one leaves the others alone (and a stream added at the end leaves the earlier ones as they were)
     root = np.random.default_rng(scenario.world.seed if seed is None else seed)
-    return root.spawn(5)
+    return root.spawn(6)
 
 
 def _resolve(scenario: Scenario, rng: np.random.Generator) -> Placement:
@@ -413,7 +418,7 @@ def _resolve(scenario: Scenario, rng: np.random.Generator) -> Placement:
 
 def build_world(scenario: Scenario, seed: int | None = None) -> World:
     """A fresh world for ``scenario``; the same seed gives the same placements, flow and plume."""
-    placement_rng, flow_rng, plume_rng, detector_rng, sensor_rng = _streams(scenario, seed)
+    placement_rng, flow_rng, plume_rng, detector_rng, sensor_rng, navigation_rng = _streams(scenario, seed)
     placement = _resolve(scenario, placement_rng)
     world, grid, config = scenario.world, scenario.grid, scenario.config
     p = world.plume
@@ -467,4 +472,5 @@ def build_world(scenario: Scenario, seed: int | None = None) -> World:
         flow_sensor=FlowSensor(
             FlowSensorParams(world.flow_sensor.noise_std_mps, world.flow_sensor.bias_deg), sensor_rng
         ),
+        navigation=Navigation(NavigationParams(v.position_error_m, v.position_error_s), navigation_rng),
     )

@@ -358,7 +358,8 @@ class VehicleStub:
         v = self.world.vehicle
         # extrapolate from the last world step to now, so fast streams are smooth
         ahead_s = max(self._sim_now_s - self.world.time_s, 0.0)
-        x_m, y_m = v.x_m + v.vx_mps * ahead_s, v.y_m + v.vy_mps * ahead_s
+        believed_x, believed_y = self.world.position_reading()
+        x_m, y_m = believed_x + v.vx_mps * ahead_s, believed_y + v.vy_mps * ahead_s
         # map ENU (x East, y North) -> NED (x North, y East)
         self._send("local_position_ned", self._time_boot_ms(), y_m, x_m, 0.0, v.vy_mps, v.vx_mps, 0.0)
 

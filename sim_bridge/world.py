@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from service.core.grid import Rectangle
 from sim_bridge import vehicle as kinematics
 from sim_bridge.detector import BinaryDetector
 from sim_bridge.flow import FlowField, velocity_at
 from sim_bridge.flow_sensor import FlowSensor, FlowSensorParams
+from sim_bridge.navigation import Navigation, NavigationParams
 from sim_bridge.plume import PuffPlume
 from sim_bridge.vehicle import VehicleParams, VehicleState
 
@@ -32,6 +35,7 @@ class World:
         obstacles: tuple[Rectangle, ...] = (),
         dt_s: float = 0.1,
         flow_sensor: FlowSensor | None = None,
+        navigation: Navigation | None = None,
     ) -> None:
         if not (math.isfinite(dt_s) and dt_s > 0):
             raise ValueError(f"dt_s must be positive and finite, got {dt_s}")
@@ -43,6 +47,7 @@ class World:
         self.obstacles = obstacles
         self.dt_s = dt_s
         self.flow_sensor = flow_sensor or FlowSensor(FlowSensorParams())
+        self.navigation = navigation or Navigation(NavigationParams(), np.random.default_rng(0))
         self.target_m: tuple[float, float] | None = None
         """Where the vehicle is driving to; None: stay put."""
         self.driving = False
@@ -61,6 +66,9 @@ class World:
         dt = self.dt_s
         self.plume.step(dt, self.flow)
         target = self.target_m if self.driving else None
+        east, north = self.navigation.error_m
+        if target is not None and (east or north):  # the autopilot steers its belief onto the target
+            target = (target[0] - east, target[1] - north)
         before = self.vehicle
         self.vehicle = kinematics.step(before, target, self.vehicle_params, dt, self.obstacles)
         self.distance_m += math.hypot(self.vehicle.x_m - before.x_m, self.vehicle.y_m - before.y_m)
@@ -68,12 +76,18 @@ class World:
         if self.detector.lags:
             self.detector.sense(self.concentration_at_vehicle(), dt)
         self.detector.advance(dt)
+        self.navigation.advance(dt)
         self._steps += 1
 
     def run(self, duration_s: float) -> None:
         """Step until ``duration_s`` more seconds have passed (rounded to whole steps)."""
         for _ in range(round(duration_s / self.dt_s)):
             self.step()
+
+    def position_reading(self) -> tuple[float, float]:
+        """Where the autopilot believes the vehicle is (map frame, m): what it reports."""
+        east, north = self.navigation.error_m
+        return self.vehicle.x_m + east, self.vehicle.y_m + north
 
     def flow_at_vehicle(self) -> tuple[float, float]:
         """Flow (u_x East, u_y North), m/s toward, at the vehicle, as its flow sensor reports it."""

@@ -86,6 +86,14 @@ def test_a_slow_sensor_changes_no_other_draw() -> None:
     ).detector.lags
 
 
+def test_a_position_error_changes_no_other_draw() -> None:
+    plain = draw_scenario(load_class(CLASSES["meander"]), 3).scenario.world
+    lost = draw_scenario(load_class(CLASSES["meander"], ["world.vehicle.position_error_m=[0.5, 2.0]"]), 3)
+    assert plain.vehicle.position_error_m == 0.0
+    assert 0.5 <= lost.scenario.world.vehicle.position_error_m <= 2.0
+    assert lost.scenario.world.model_copy(update={"vehicle": plain.vehicle}) == plain
+
+
 def _signature(world_class: WorldClass, seed: int) -> tuple[object, ...]:
     drawn = draw_scenario(world_class, seed)
     world = build_world(drawn.scenario, seed)

@@ -228,18 +228,20 @@ def run_mission(
             if step_count % sample_every == 0:
                 t = world.time_s
                 flow_x, flow_y = world.flow_at_vehicle()
-                search.add_position(t, world.vehicle.x_m, world.vehicle.y_m)
+                search.add_position(t, *world.position_reading())
                 search.add_flow(t, flow_x, flow_y)
                 search.add_chemical(t, world.chem_reading())
             if step_count % command_every == 0:
                 # the service re-sends its target at the setpoint rate, from the latest position
-                world.target_m = search.setpoint(world.time_s, (world.vehicle.x_m, world.vehicle.y_m))
+                world.target_m = search.setpoint(world.time_s, world.position_reading())
         v = world.vehicle
-        # the planner starts from where the simulated vehicle is now, as the service's does
-        step = search.tick(world.time_s, vehicle=(v.x_m, v.y_m, v.heading_rad))
+        believed = world.position_reading()
+        # the planner starts from where the simulated vehicle is now (as its autopilot believes),
+        # as the service's does
+        step = search.tick(world.time_s, vehicle=(*believed, v.heading_rad))
         if step is None:  # cannot happen with every stream sampled; kept for a sampling rate < 1/tick
             continue
-        world.target_m = search.setpoint(world.time_s, (v.x_m, v.y_m))
+        world.target_m = search.setpoint(world.time_s, believed)
         if on_tick is not None:
             on_tick(search, step)
         if step.detected and first_detection is None:
