@@ -36,16 +36,18 @@ class NavigationParams:
 class Navigation:
     """The position error (east, north), m, advanced in simulated time."""
 
-    def __init__(self, params: NavigationParams, rng: np.random.Generator) -> None:
+    def __init__(self, params: NavigationParams, rng: np.random.Generator | None = None) -> None:
+        if params.error_m > 0 and rng is None:
+            raise ValueError("a navigation error needs a random generator")
         self.params = params
         self._rng = rng
         self.error_m = (0.0, 0.0)
-        if params.error_m > 0:
+        if rng is not None and params.error_m > 0:
             east, north = rng.normal(0.0, params.error_m, 2)
             self.error_m = (float(east), float(north))
 
     def advance(self, dt_s: float) -> None:
-        if self.params.error_m <= 0:
+        if self._rng is None or self.params.error_m <= 0:
             return
         keep = math.exp(-dt_s / self.params.error_s)
         shock = self.params.error_m * math.sqrt(1.0 - keep * keep)

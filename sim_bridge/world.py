@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from service.core.grid import Rectangle
 from sim_bridge import vehicle as kinematics
 from sim_bridge.detector import BinaryDetector
@@ -47,7 +45,7 @@ class World:
         self.obstacles = obstacles
         self.dt_s = dt_s
         self.flow_sensor = flow_sensor or FlowSensor(FlowSensorParams())
-        self.navigation = navigation or Navigation(NavigationParams(), np.random.default_rng(0))
+        self.navigation = navigation or Navigation(NavigationParams())
         self.target_m: tuple[float, float] | None = None
         """Where the vehicle is driving to; None: stay put."""
         self.driving = False
