@@ -26,6 +26,10 @@ class Autopilot:
     """custom_mode of GUIDED."""
     initial: int
     """Mode at boot (ArduPilot's INITIAL_MODE default)."""
+    radius_param: str | None = None
+    """The parameter within which a guided target counts as reached (Rover's WP_RADIUS); the stub
+    answers PARAM_REQUEST_READ of it with the world's arrival radius. None: the vehicle drives onto
+    its targets and has no such parameter."""
 
     def mode_name(self, custom_mode: int) -> str:
         return self.modes.get(custom_mode, f"MODE({custom_mode})")
@@ -40,7 +44,11 @@ _SUB_MODES = {0: "STABILIZE", 1: "ACRO", 2: "ALT_HOLD", 3: "AUTO", 4: "GUIDED", 
 AUTOPILOTS: MappingProxyType[VehicleKind, Autopilot] = MappingProxyType(
     {
         VehicleKind.ROVER: Autopilot(
-            mav_type="MAV_TYPE_GROUND_ROVER", modes=MappingProxyType(_ROVER_MODES), guided=15, initial=0
+            mav_type="MAV_TYPE_GROUND_ROVER",
+            modes=MappingProxyType(_ROVER_MODES),
+            guided=15,
+            initial=0,
+            radius_param="WP_RADIUS",
         ),
         VehicleKind.SUB: Autopilot(
             mav_type="MAV_TYPE_SUBMARINE", modes=MappingProxyType(_SUB_MODES), guided=4, initial=19

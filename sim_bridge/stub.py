@@ -3,7 +3,8 @@
 System 1, component 1, MAVLink 2 (ardupilotmega dialect). It sends HEARTBEAT with
 MAV_AUTOPILOT_ARDUPILOTMEGA, a rover or submarine type and ArduPilot's custom_mode; honours
 SET_MODE and MAV_CMD_DO_SET_MODE, MAV_CMD_COMPONENT_ARM_DISARM, MAV_CMD_SET_MESSAGE_INTERVAL and
-MAV_CMD_REQUEST_MESSAGE with COMMAND_ACK; streams LOCAL_POSITION_NED, the flow at the vehicle as
+MAV_CMD_REQUEST_MESSAGE with COMMAND_ACK; answers PARAM_REQUEST_READ of a rover's WP_RADIUS (the
+world's arrival radius) with PARAM_VALUE; streams LOCAL_POSITION_NED, the flow at the vehicle as
 WIND (as ArduPilot) and WIND_COV (as PX4), NAMED_VALUE_FLOAT "CHEM" and, when asked,
 NAMED_VALUE_INT "CHEM_DET"; drives toward the latest SET_POSITION_TARGET_LOCAL_NED
 (MAV_FRAME_LOCAL_NED, type_mask 3576 or 3580) only while armed in GUIDED. Anything malformed or
@@ -176,6 +177,7 @@ class VehicleStub:
             "COMMAND_INT": self._on_command,
             "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
             "STATUSTEXT": self._on_statustext,
+            "PARAM_REQUEST_READ": self._on_param_request,
         }
         self._senders: dict[Stream, Callable[[], None]] = {
             Stream.HEARTBEAT: self._send_heartbeat,
@@ -463,6 +465,18 @@ class VehicleStub:
         text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode(errors="replace")
         self._texts.append(StatusText(self._sim_now_s, int(msg.severity), text.rstrip("\x00")))
         log.info("STATUSTEXT from %d/%d: %s", msg.get_srcSystem(), msg.get_srcComponent(), text)
+
+    def _on_param_request(self, msg: Any) -> None:
+        """PARAM_VALUE for the one parameter the stub has (a rover's WP_RADIUS); as ArduPilot, no
+        answer for a name it does not know."""
+        name = self._autopilot.radius_param
+        raw = msg.param_id
+        wanted = (raw if isinstance(raw, str) else bytes(raw).decode(errors="replace")).rstrip("\x00")
+        by_name = msg.param_index == -1 and wanted == name
+        if name is None or not (by_name or msg.param_index == 0):
+            return
+        radius = self.world.vehicle_params.arrival_radius_m
+        self._send("param_value", name.encode(), radius, self._dialect.MAV_PARAM_TYPE_REAL32, 1, 0)
 
     def pilot_mode(self, custom_mode: int) -> bool:
         """The pilot's mode switch (RC or ground station): False for a mode the vehicle lacks."""

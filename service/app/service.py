@@ -4,7 +4,8 @@ Tasks, all on one event loop:
 - *read*: MAVLink messages (from the link's reader thread) -> typed telemetry -> the command gate
   and the tick aggregator; rejected values are counted and logged once per reason;
 - *heartbeat*: HEARTBEAT as the onboard computer at 1 Hz; stream requests when the autopilot
-  is first heard and whenever the link comes back;
+  is first heard and whenever the link comes back; an ArduPilot rover or boat is asked for its
+  acceptance radius (``WP_RADIUS``) until it answers, so that setpoints lead it from the start;
 - *tick*: at every tick (absolute deadlines, no drift) the aggregated observation goes through
   the mission step (mapper, state machine, planner); maps, estimate, path and observation are
   published over Zenoh and recorded to MCAP; events become STATUSTEXT and log lines;
@@ -47,7 +48,7 @@ from service.core.planning.safety import is_safe_point
 from service.edges.foxglove_scene import SceneBuilder
 from service.edges.signing import load_signing_key
 from service.edges.snapshot import Snapshot, SnapshotWriter, fingerprint, map_digest, read_snapshot
-from service.edges.telemetry import Heartbeat, Rejected, TelemetrySettings, decode
+from service.edges.telemetry import Heartbeat, ParamValue, Rejected, TelemetrySettings, decode
 
 log = logging.getLogger("oslim")
 
@@ -56,6 +57,14 @@ SILENT_TICKS = 5
 
 STREAMS = {"LOCAL_POSITION_NED": 32, "WIND": 168, "WIND_COV": 231}
 """Messages the service asks the autopilot for (MAVLink message ids)."""
+
+MAV_AUTOPILOT_ARDUPILOTMEGA = 3
+RADIUS_PARAMS = {10: "WP_RADIUS", 11: "WP_RADIUS"}
+"""MAV_TYPE (ground rover, surface boat) -> the ArduPilot parameter within which the vehicle counts
+a guided target as reached and stops. ArduCopter and ArduSub fly onto their targets."""
+RADIUS_ASKS = 5
+"""How many times (one a second) the acceptance radius is asked for before ``Lead`` is left to
+learn it from the vehicle's stops."""
 
 
 def request_streams(link: VehicleLink, system: int, settings: TelemetrySettings, rate_hz: float) -> list[str]:
@@ -168,6 +177,9 @@ class Service:
         self._gate_state = GateState(False, "starting")
         self._link_was_alive = False
         self._radius_told = 0.0
+        self._radius_asked = 0
+        self._radius_param: str | None = None
+        """The acceptance radius's parameter asked of the autopilot until it answers (None: none)."""
         self._signing_key = (
             load_signing_key(config.mavlink.signing_key_file) if config.mavlink.signing_key_file else None
         )
@@ -271,6 +283,8 @@ class Service:
                 self.gate.heard(item)
                 if self.gate.system == item.system:
                     link.adopt_system(item.system)
+            elif isinstance(item, ParamValue):
+                self._on_param(edges, item)
             else:
                 self.search.add(item)
 
@@ -284,6 +298,8 @@ class Service:
                 streams = request_streams(link, self.gate.system, self.settings, rate_hz)
                 log.info("autopilot %d heard: requested %s at %.1f Hz", self.gate.system, ", ".join(streams),
                          rate_hz)  # fmt: skip
+            if alive:
+                self._ask_radius(link)
             self._link_was_alive = alive
             await self.clock.sleep_until(now + 1.0)
 
@@ -450,13 +466,41 @@ class Service:
         self._tell_radius(edges, now)
         return True
 
-    def _tell_radius(self, edges: Edges, now: float) -> None:
+    def _ask_radius(self, link: VehicleLink) -> None:
+        """Ask an ArduPilot rover or boat for its acceptance radius, once a second until it answers
+        (``RADIUS_ASKS`` at most: a lost request is asked again, a vehicle that never answers is
+        left to ``Lead``, which learns the radius from its stops)."""
+        hb = self.gate.last
+        if hb is None or hb.autopilot != MAV_AUTOPILOT_ARDUPILOTMEGA or self._radius_asked >= RADIUS_ASKS:
+            return
+        name = RADIUS_PARAMS.get(hb.vehicle_type)
+        if name is None:
+            return
+        self._radius_param = name
+        self._radius_asked += 1
+        link.request_param(hb.system, name)
+
+    def _on_param(self, edges: Edges, param: ParamValue) -> None:
+        """The acceptance radius the autopilot gave: setpoints lead the vehicle by it from now on."""
+        if self._radius_param is None or param.name != self._radius_param or param.system != self.gate.system:
+            return
+        self._radius_asked = RADIUS_ASKS  # answered: not asked again
+        self._radius_param = None
+        if not 0.0 <= param.value <= 100.0:
+            log.warning("ignored the autopilot's %s = %g m (not a distance)", param.name, param.value)
+            return
+        led = self.search.tell_arrival_radius(param.value)
+        log.info("autopilot's %s is %.2f m: %s", param.name, param.value,
+                 "setpoints lead it" if led else "setpoints need not lead it")  # fmt: skip
+        self._tell_radius(edges, param.time_s, source=param.name)
+
+    def _tell_radius(self, edges: Edges, now: float, source: str = "WP_RADIUS?") -> None:
         """Say once (and again if it grows) that the autopilot stops short of its targets."""
         radius = self.search.arrival_radius_m
         if radius <= self._radius_told + 0.1:
             return
         self._radius_told = radius
-        text = f"autopilot stops {radius:.1f} m short of its targets (WP_RADIUS?): setpoints now lead it"
+        text = f"autopilot stops {radius:.1f} m short of its targets ({source}): setpoints now lead it"
         log.warning("%s", text)
         edges.recorder.write_event(now, "arrival_radius", text, radius_m=radius)
 

@@ -195,6 +195,11 @@ class MavlinkLink:
             )
         )
 
+    def request_param(self, target_system: int, name: str) -> None:
+        """PARAM_REQUEST_READ of one parameter by name (the autopilot answers with PARAM_VALUE)."""
+        m = self._mav
+        self._send(m.MAVLink_param_request_read_message(target_system, 1, name.encode("ascii"), -1))
+
     def send_setpoint(
         self, target_system: int, time_ms: int, x_m: float, y_m: float, altitude_m: float, type_mask: int
     ) -> None:

@@ -41,6 +41,16 @@ class Heartbeat:
 
 
 @dataclass(frozen=True)
+class ParamValue:
+    """One of the autopilot's parameters, as it answered PARAM_REQUEST_READ."""
+
+    time_s: float
+    system: int
+    name: str
+    value: float
+
+
+@dataclass(frozen=True)
 class Rejected:
     """A message that was understood but not used, and why (counted and logged by the caller)."""
 
@@ -48,7 +58,7 @@ class Rejected:
     reason: str
 
 
-Telemetry = Heartbeat | Position | FlowSample | ChemSample | DetectionSample
+Telemetry = Heartbeat | ParamValue | Position | FlowSample | ChemSample | DetectionSample
 
 
 @dataclass(frozen=True)
@@ -122,6 +132,10 @@ def decode(msg: Any, time_s: float, settings: TelemetrySettings) -> Telemetry | 
         if not _finite(msg.value):
             return Rejected(kind, "non-finite chemical reading")
         return ChemSample(time_s, float(msg.value))
+    if kind == "PARAM_VALUE":
+        if not _finite(msg.param_value):
+            return Rejected(kind, "non-finite parameter value")
+        return ParamValue(time_s, msg.get_srcSystem(), _name(msg.param_id), float(msg.param_value))
     if kind == "NAMED_VALUE_INT" and _name(msg.name) == settings.detection_name:
         if msg.value not in (0, 1):
             return Rejected(kind, f"detection value {msg.value} is not 0 or 1")

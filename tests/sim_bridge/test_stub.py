@@ -125,6 +125,17 @@ def test_message_interval_zero_restores_the_default_and_request_message_sends_on
     assert detection.value in (0, 1)
 
 
+def test_a_rover_reports_its_acceptance_radius_as_wp_radius(fly: Fly) -> None:
+    def talk(c: Any, stub: VehicleStub) -> Any:
+        c.recv("HEARTBEAT")
+        c.conn.mav.param_request_read_send(1, 1, b"WP_RADIUS", -1)
+        return c.recv("PARAM_VALUE")
+
+    value = fly(wang("world.vehicle.arrival_radius_m=2"), talk)
+    assert (value.param_id, value.param_value) == ("WP_RADIUS", 2.0)
+    assert value.param_type == MAV.MAV_PARAM_TYPE_REAL32
+
+
 def test_moves_toward_a_setpoint_at_the_configured_speed_and_stops_there(fly: Fly) -> None:
     # start (58.75, 44) heading South; target 20 m South: NED (24, 58.75); speed factor 4
     def talk(c: Any, stub: VehicleStub) -> list[Any]:

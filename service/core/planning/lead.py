@@ -3,7 +3,8 @@
 ArduPilot Rover counts a guided target as reached once it is within ``WP_RADIUS`` (2 m by default)
 and holds still there. The mission steers from cell to cell (1.25 m apart on the default area), so
 with such an autopilot the next target is often inside the radius already and the vehicle never
-moves again. ``Lead`` learns the radius from the vehicle's own behaviour, with no setting: a
+moves again. The service asks the autopilot for the radius (``tell``); where it does not answer,
+``Lead`` learns the radius from the vehicle's own behaviour, with no setting: a
 vehicle that stays put for ``STALL_S`` while every target it is sent lies ``STALL_MIN_M`` to
 ``MAX_RADIUS_M`` away has an acceptance radius at least as large as the farthest. Once the
 radius r is known, each setpoint is the first point of the plan ``r + LEAD_MARGIN_M`` away (pure
@@ -143,14 +144,17 @@ class Lead:
     def setpoint(
         self, t_s: float, x: float, y: float, plan: Sequence[Waypoint], *, hold: bool = False
     ) -> Waypoint | None:
-        """The target to command now for a vehicle at (x, y) flying ``plan``; a ``hold`` plan's point
-        is commanded as it is (the vehicle is to stop there). None for an empty plan."""
+        """The target to command now for a vehicle at (x, y) flying ``plan``. A ``hold`` plan's
+        point is where the vehicle is to stop: one it stands on is commanded as it is, one farther
+        is driven through like a plan's end (a vehicle stopped in an obstacle's cell is held at the
+        nearest free cell's centre, often inside its radius; sent there as it is, it would never
+        move). A hold teaches nothing of the radius. None for an empty plan."""
         if not plan:
             self._watch(t_s, x, y, None)
             return None
         end = plan[-1]
         there = len(plan) == 1 and math.hypot(end.x - x, end.y - y) <= THERE_M
-        if hold or there or self.radius_m <= 0.0:
+        if there or self.radius_m <= 0.0:
             target = plan[0]
         else:
             r = self.radius_m
@@ -160,6 +164,14 @@ class Lead:
         else:
             self._since = None
         return target
+
+    def tell(self, radius_m: float) -> bool:
+        """The radius as the autopilot gives it; one no larger than ``THERE_M`` (the mission's own
+        arrival distance) needs no lead. A larger radius learnt from the vehicle's stops stands.
+        Whether setpoints now lead the vehicle."""
+        if radius_m > THERE_M:
+            self.radius_m = max(self.radius_m, radius_m)
+        return self.radius_m > 0.0
 
     def planning_point(self, t_s: float, x: float, y: float, plan: Sequence[Waypoint]) -> tuple[float, float]:
         """Where the mission should plan from at ``t_s``: (x, y), or the plan's end for a vehicle

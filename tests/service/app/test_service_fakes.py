@@ -13,7 +13,7 @@ import pytest
 
 from service.api import Search
 from service.app.edges import Edges
-from service.app.service import STREAMS, Clock, Service
+from service.app.service import RADIUS_ASKS, STREAMS, Clock, Service
 from service.core.config import Config, build_config
 from service.core.errors import LinkError
 from service.core.observation import Observation
@@ -69,6 +69,9 @@ class FakeLink:
 
     def request_interval(self, target_system: int, message_id: int, rate_hz: float) -> None:
         self.sent.append(("interval", (target_system, message_id, rate_hz)))
+
+    def request_param(self, target_system: int, name: str) -> None:
+        self.sent.append(("param", (target_system, name)))
 
     def send_setpoint(
         self, target_system: int, time_ms: int, x_m: float, y_m: float, altitude_m: float, type_mask: int
@@ -138,14 +141,15 @@ async def until(condition: Callable[[], bool], timeout_s: float = 10.0) -> None:
             await asyncio.sleep(0.005)
 
 
-async def vehicle(service: Service, link: FakeLink, *, armed: bool = True) -> None:
-    """A vehicle in GUIDED driving east through odour: heartbeat at 1 Hz, the rest at 5 Hz."""
+async def vehicle(service: Service, link: FakeLink, *, armed: bool = True, mav_type: int = 10) -> None:
+    """A vehicle in GUIDED driving east through odour: heartbeat at 1 Hz, the rest at 5 Hz (an
+    ArduPilot rover unless ``mav_type`` says otherwise)."""
     clock, k = service.clock, 0
     while True:
         t = clock.now()
         if k % 5 == 0:
             link.inbox.put_nowait((t, FakeMessage(
-                "HEARTBEAT", type=10, autopilot=3, base_mode=ARMED if armed else 0,
+                "HEARTBEAT", type=mav_type, autopilot=3, base_mode=ARMED if armed else 0,
                 custom_mode=service.config.mavlink.guided_mode,
             )))  # fmt: skip
         # LOCAL_POSITION_NED is north, east: map x = 10 + 0.5 t east, y = 0
@@ -323,3 +327,64 @@ def test_an_autopilot_that_stops_short_is_led_and_told_of_once() -> None:
     assert sent[0] == (52.0, 0.0)
     assert sent[-1] == (pytest.approx(52.0 + 2.0 + 0.3), 0.0)  # through the target, to stop just past it
     assert recorder.events.count("arrival_radius") == 1
+
+
+def run_with_vehicle(
+    seconds: float, *, mav_type: int = 10, answer_after: int | None = None, radius_m: float = 2.0
+) -> tuple[FakeLink, FakeRecorder, Service]:
+    """The service ``seconds`` (service time) with ``vehicle``; the autopilot answers the
+    ``answer_after``-th request of WP_RADIUS with ``radius_m`` (None: it never answers)."""
+    link, _, recorder, edges = fakes()
+    service = Service(Config(), clock=Clock(SPEED))
+
+    async def autopilot_params() -> None:
+        while answer_after is not None:
+            if len(link.of("param")) >= answer_after:
+                value = FakeMessage("PARAM_VALUE", param_id=b"WP_RADIUS", param_value=radius_m)
+                link.inbox.put_nowait((service.clock.now(), value))
+                return
+            await asyncio.sleep(0.002)
+
+    async def body() -> None:
+        stop = asyncio.Event()
+        run = asyncio.create_task(service.run_with(edges, stop))
+        tasks = [
+            asyncio.create_task(vehicle(service, link, mav_type=mav_type)),
+            asyncio.create_task(autopilot_params()),
+        ]
+        await service.clock.sleep_until(seconds)
+        stop.set()
+        await run
+        for task in tasks:
+            task.cancel()
+
+    asyncio.run(body())
+    return link, recorder, service
+
+
+def test_an_ardupilot_rover_is_asked_for_its_acceptance_radius_until_it_answers() -> None:
+    # the first request is lost: the second is answered, and setpoints lead the rover from then on
+    link, recorder, service = run_with_vehicle(RADIUS_ASKS + 4.0, answer_after=2)
+    assert link.of("param") == [(1, "WP_RADIUS")] * 2
+    assert service.search.arrival_radius_m == pytest.approx(2.0)
+    assert recorder.events.count("arrival_radius") == 1
+
+
+def test_a_radius_the_mission_reaches_anyway_is_not_led() -> None:
+    # WP_RADIUS 0.5 (what the README advises): the autopilot stops where the mission counts a point
+    # as reached, so setpoints stay the plan's own points
+    link, recorder, service = run_with_vehicle(4.0, answer_after=1, radius_m=0.5)
+    assert link.of("param") == [(1, "WP_RADIUS")]
+    assert service.search.arrival_radius_m == 0.0
+    assert "arrival_radius" not in recorder.events
+
+
+def test_an_autopilot_that_never_answers_is_asked_a_few_times_then_left_to_the_learning() -> None:
+    link, _, service = run_with_vehicle(RADIUS_ASKS + 4.0)
+    assert link.of("param") == [(1, "WP_RADIUS")] * RADIUS_ASKS
+    assert service.search.arrival_radius_m == 0.0
+
+
+def test_a_vehicle_that_flies_onto_its_targets_is_not_asked() -> None:
+    link, _, _ = run_with_vehicle(4.0, mav_type=12)  # ArduSub
+    assert link.of("param") == []

@@ -7,6 +7,7 @@ from service.core.samples import ChemSample, DetectionSample, FlowSample, Positi
 from service.edges.mavlink_dialect import dialect
 from service.edges.telemetry import (
     Heartbeat,
+    ParamValue,
     Rejected,
     TelemetrySettings,
     decode,
@@ -54,6 +55,13 @@ def test_named_values() -> None:
     assert decode(det, 2.0, SETTINGS) == DetectionSample(2.0, True)
     bad = over_the_wire(mav.MAVLink_named_value_int_message(0, b"CHEM_DET", 7))
     assert isinstance(decode(bad, 2.0, SETTINGS), Rejected)
+
+
+def test_a_parameter_the_autopilot_reports() -> None:
+    msg = over_the_wire(mav.MAVLink_param_value_message(b"WP_RADIUS", 2.0, 9, 1200, 431), system=7)
+    assert decode(msg, 3.0, SETTINGS) == ParamValue(3.0, 7, "WP_RADIUS", 2.0)
+    nan = over_the_wire(mav.MAVLink_param_value_message(b"WP_RADIUS", math.nan, 9, 1200, 431))
+    assert decode(nan, 3.0, SETTINGS) == Rejected("PARAM_VALUE", "non-finite parameter value")
 
 
 def test_heartbeat_of_the_autopilot_only() -> None:
