@@ -45,6 +45,7 @@ from service.core.mapping.mapper import SourceMapper
 from service.core.mission import MissionEvent, PlumeFound, PlumeLost, SourceDeclared
 from service.core.planning.base import Waypoint
 from service.core.planning.safety import is_safe_point
+from service.core.samples import DetectionSample
 from service.edges.foxglove_scene import SceneBuilder
 from service.edges.signing import load_signing_key
 from service.edges.snapshot import Snapshot, SnapshotWriter, fingerprint, map_digest, read_snapshot
@@ -178,6 +179,7 @@ class Service:
         self._link_was_alive = False
         self._radius_told = 0.0
         self._radius_asked = 0
+        self._lag_warned = False
         self._radius_param: str | None = None
         """The acceptance radius's parameter asked of the autopilot until it answers (None: none)."""
         self._signing_key = (
@@ -286,7 +288,20 @@ class Service:
             elif isinstance(item, ParamValue):
                 self._on_param(edges, item)
             else:
+                if isinstance(item, DetectionSample):
+                    self._warn_unlagged()
                 self.search.add(item)
+
+    def _warn_unlagged(self) -> None:
+        """Say once that a sensor's own detection cannot have its response time undone (only its
+        reading can, in the tick aggregator)."""
+        response_s = self.config.sensor.response_s
+        if response_s <= 0 or self._lag_warned:
+            return
+        self._lag_warned = True
+        log.warning("%s is a detection, not a reading: sensor.response_s (%.2f s) cannot be undone for it; "
+                    "send the reading as %s", self.settings.detection_name, response_s,
+                    self.settings.chem_name)  # fmt: skip
 
     async def _heartbeat(self, link: VehicleLink) -> None:
         while True:

@@ -388,3 +388,26 @@ def test_an_autopilot_that_never_answers_is_asked_a_few_times_then_left_to_the_l
 def test_a_vehicle_that_flies_onto_its_targets_is_not_asked() -> None:
     link, _, _ = run_with_vehicle(4.0, mav_type=12)  # ArduSub
     assert link.of("param") == []
+
+
+def test_a_detection_stream_with_a_response_time_is_warned_of_once(caplog: pytest.LogCaptureFixture) -> None:
+    # sensor.response_s undoes a slow sensor's lag on its readings (CHEM); a sensor that sends only
+    # its own detection (CHEM_DET) cannot be helped, and the log says so once
+    link, _, _, edges = fakes()
+    service = Service(build_config({"sensor": {"response_s": 2.0}}), clock=Clock(SPEED))
+
+    async def body() -> None:
+        stop = asyncio.Event()
+        run = asyncio.create_task(service.run_with(edges, stop))
+        for k in range(3):
+            detection = FakeMessage("NAMED_VALUE_INT", name=b"CHEM_DET", value=k % 2)
+            link.inbox.put_nowait((service.clock.now(), detection))
+        await service.clock.sleep_until(2.0)
+        stop.set()
+        await run
+
+    with caplog.at_level("WARNING", logger="oslim"):
+        asyncio.run(body())
+    warned = [r.getMessage() for r in caplog.records if "cannot be undone" in r.getMessage()]
+    assert warned == ["CHEM_DET is a detection, not a reading: sensor.response_s (2.00 s) cannot be undone "
+                      "for it; send the reading as CHEM"]  # fmt: skip
