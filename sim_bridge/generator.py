@@ -155,6 +155,9 @@ class VehicleRanges(_Spec):
     """The autopilot's position error (each axis's standard deviation); the suite's is perfect."""
     position_error_s: Range = (60.0, 60.0)
     """Its correlation time, s."""
+    accel_mps2: Range = (0.0, 0.0)
+    """The autopilot's acceleration and braking limit (ArduPilot's ATC_ACCEL_MAX, 1 m/s/s on Rover);
+    0: the suite's vehicles change speed at once."""
 
 
 class WorldRanges(_Spec):
@@ -424,6 +427,7 @@ def draw_scenario(world_class: WorldClass, seed: int, config: Config | None = No
     world["detector"]["noise_std"] = draw.value(spec.detector.noise_std)
     world["vehicle"]["position_error_m"] = draw.value(spec.vehicle.position_error_m)
     world["vehicle"]["position_error_s"] = draw.value(spec.vehicle.position_error_s)
+    world["vehicle"]["accel_mps2"] = draw.value(spec.vehicle.accel_mps2)
     service = base.model_copy(
         update={
             "area": base.area.model_validate({**area, "obstacles": obstacles}),

@@ -138,6 +138,9 @@ class VehicleSpec(_Spec):
     """Standard deviation of each axis of the autopilot's position error, m (``navigation``)."""
     position_error_s: float = Field(default=60.0, gt=0)
     """Correlation time of that error, s."""
+    accel_mps2: float = Field(default=0.0, ge=0, le=50)
+    """Acceleration and braking limit, m/s/s: the autopilot speeds up at most this fast and brakes
+    to stop at its target, as ArduPilot's position controller does; 0: speed changes at once."""
 
     @model_validator(mode="after")
     def _one_of(self) -> Self:
@@ -466,6 +469,7 @@ def build_world(scenario: Scenario, seed: int | None = None) -> World:
             pivot_angle_deg=v.pivot_angle_deg,
             slows_to_turn=v.slows_to_turn,
             arrival_radius_m=v.arrival_radius_m,
+            accel_mps2=v.accel_mps2,
         ),
         obstacles=grid.obstacles,
         dt_s=world.dt_s,

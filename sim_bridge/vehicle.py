@@ -40,6 +40,10 @@ class VehicleParams:
     arrival_radius_m: float = 0.0
     """A target this close counts as reached and the vehicle stops short of it (ArduPilot's
     WP_RADIUS, 2 m on Rover by default); 0: it drives onto the target."""
+    accel_mps2: float = 0.0
+    """Acceleration and braking limit: the vehicle speeds up at most this fast, brakes so as to stop
+    at its target (ArduPilot's position controller, ATC_ACCEL_MAX: 1 m/s/s on Rover), and brakes to
+    a stop before it turns on the spot; 0: its speed changes at once."""
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.speed_mps) and self.speed_mps > 0):
@@ -50,6 +54,8 @@ class VehicleParams:
             raise ConfigError(f"vehicle pivot_angle_deg must be in (0, 180], got {self.pivot_angle_deg}")
         if not (math.isfinite(self.arrival_radius_m) and self.arrival_radius_m >= 0):
             raise ConfigError(f"vehicle arrival_radius_m must be >= 0, got {self.arrival_radius_m}")
+        if not (math.isfinite(self.accel_mps2) and self.accel_mps2 >= 0):
+            raise ConfigError(f"vehicle accel_mps2 must be >= 0, got {self.accel_mps2}")
 
 
 @dataclass(frozen=True)
@@ -112,11 +118,24 @@ def step(
     error = wrap_angle(state.heading_rad - theta)  # epsilon = phi - theta
     max_turn = math.radians(params.max_turn_rate_dps) * dt_s
     heading = wrap_angle(state.heading_rad - max(-max_turn, min(max_turn, error)))
-    if abs(error) > math.radians(params.pivot_angle_deg):
+    accel = params.accel_mps2
+    pivot = abs(error) > math.radians(params.pivot_angle_deg)
+    if pivot and accel > 0.0:
+        # brake to a stop on the current heading before turning on the spot
+        speed = max(math.hypot(state.vx_mps, state.vy_mps) - accel * dt_s, 0.0)
+        if speed == 0.0:
+            return replace(still, heading_rad=heading)
+        heading, reach = state.heading_rad, speed * dt_s
+    elif pivot:
         return replace(still, heading_rad=heading)
-    reach = params.speed_mps * dt_s
-    if params.slows_to_turn:
-        reach *= max(math.cos(error), _LEAST_TURN_SPEED)
+    else:
+        reach = params.speed_mps * dt_s
+        if params.slows_to_turn:
+            reach *= max(math.cos(error), _LEAST_TURN_SPEED)
+        if accel > 0.0:
+            # speed up at most accel, and no faster than stops at the target: v^2 = 2 a d
+            braking = math.sqrt(2.0 * accel * max(distance - params.arrival_radius_m, 0.0))
+            reach = min(reach, (math.hypot(state.vx_mps, state.vy_mps) + accel * dt_s) * dt_s, braking * dt_s)
     if distance <= reach:
         moves = [(target_m[0], target_m[1])]
     else:

@@ -100,3 +100,24 @@ def test_an_arrival_radius_stops_the_vehicle_short_of_its_target_as_ardupilot_do
     assert (near[-1].x_m, near[-1].y_m) == (0.0, 0.0)  # a target inside the radius is not driven to
     with pytest.raises(ConfigError):
         VehicleParams(arrival_radius_m=-1.0)
+
+
+def test_an_accelerating_autopilot_speeds_up_brakes_onto_its_target_and_stops_before_a_pivot() -> None:
+    # 2 m/s at 1 m/s/s: 2 s (2 m) to speed up, 8 s at speed, 2 s (2 m) to brake onto a target 20 m
+    # away, against 10 s at once
+    params = VehicleParams(speed_mps=2.0, accel_mps2=1.0)
+    path = drive(VehicleState(0.0, 0.0, EAST), (20.0, 0.0), params, 200)
+    arrived = next(k for k, s in enumerate(path) if s.x_m == 20.0)
+    assert 11.8 <= arrived * 0.1 <= 12.6
+    speeds = [math.hypot(s.vx_mps, s.vy_mps) for s in path]
+    assert max(speeds) == pytest.approx(2.0)
+    assert all(b - a <= 1.0 * 0.1 + 1e-9 for a, b in itertools.pairwise(speeds[: arrived - 1]))
+    assert speeds[5] == pytest.approx(0.5)
+    # a target behind a moving rover: it brakes along its heading, then turns on the spot
+    moving = VehicleState(0.0, 0.0, EAST, vx_mps=2.0)
+    back = drive(moving, (-10.0, 0.0), params, 30)
+    assert back[15].heading_rad == EAST  # still braking, on its heading
+    assert back[-1].x_m == pytest.approx(2.0**2 / 2.0, abs=0.15)  # v^2 / 2a on, then stopped
+    assert back[-1].heading_rad != EAST
+    with pytest.raises(ConfigError):
+        VehicleParams(accel_mps2=-1.0)
