@@ -136,6 +136,26 @@ def test_a_rover_reports_its_acceptance_radius_as_wp_radius(fly: Fly) -> None:
     assert value.param_type == MAV.MAV_PARAM_TYPE_REAL32
 
 
+def test_a_parameter_the_vehicle_lacks_gets_no_answer(fly: Fly) -> None:
+    # as ArduPilot: a name it does not know is not answered (a rover's other parameters, any of a sub)
+    from sim_bridge.autopilot import VehicleKind
+
+    def asking(name: bytes) -> Callable[[Any, VehicleStub], bool]:
+        def talk(c: Any, stub: VehicleStub) -> bool:
+            c.recv("HEARTBEAT")
+            c.conn.mav.param_request_read_send(1, 1, name, -1)
+            try:
+                c.recv("PARAM_VALUE", timeout_s=0.5)
+            except AssertionError:
+                return False
+            return True
+
+        return talk
+
+    assert not fly(wang("world.vehicle.arrival_radius_m=2"), asking(b"WP_RADIUS"), kind=VehicleKind.SUB)
+    assert not fly(wang(), asking(b"WP_SPEED"))
+
+
 def test_moves_toward_a_setpoint_at_the_configured_speed_and_stops_there(fly: Fly) -> None:
     # start (58.75, 44) heading South; target 20 m South: NED (24, 58.75); speed factor 4
     def talk(c: Any, stub: VehicleStub) -> list[Any]:
