@@ -119,10 +119,11 @@ def step(
     max_turn = math.radians(params.max_turn_rate_dps) * dt_s
     heading = wrap_angle(state.heading_rad - max(-max_turn, min(max_turn, error)))
     accel = params.accel_mps2
+    moving = math.hypot(state.vx_mps, state.vy_mps) if accel > 0.0 else 0.0
     pivot = abs(error) > math.radians(params.pivot_angle_deg)
     if pivot and accel > 0.0:
         # brake to a stop on the current heading before turning on the spot
-        speed = max(math.hypot(state.vx_mps, state.vy_mps) - accel * dt_s, 0.0)
+        speed = max(moving - accel * dt_s, 0.0)
         if speed == 0.0:
             return replace(still, heading_rad=heading)
         heading, reach = state.heading_rad, speed * dt_s
@@ -135,7 +136,7 @@ def step(
         if accel > 0.0:
             # speed up at most accel, and no faster than stops at the target: v^2 = 2 a d
             braking = math.sqrt(2.0 * accel * max(distance - params.arrival_radius_m, 0.0))
-            reach = min(reach, (math.hypot(state.vx_mps, state.vy_mps) + accel * dt_s) * dt_s, braking * dt_s)
+            reach = min(reach, (moving + accel * dt_s) * dt_s, braking * dt_s)
     if distance <= reach:
         moves = [(target_m[0], target_m[1])]
     else:

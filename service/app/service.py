@@ -504,10 +504,10 @@ class Service:
         if not 0.0 <= param.value <= 100.0:
             log.warning("ignored the autopilot's %s = %g m (not a distance)", param.name, param.value)
             return
-        led = self.search.tell_arrival_radius(param.value)
-        log.info("autopilot's %s is %.2f m: %s", param.name, param.value,
-                 "setpoints lead it" if led else "setpoints need not lead it")  # fmt: skip
-        self._tell_radius(edges, param.time_s, source=param.name)
+        if self.search.tell_arrival_radius(param.value):
+            self._tell_radius(edges, param.time_s, source=param.name)
+        else:
+            log.info("autopilot's %s is %.2f m: setpoints need not lead it", param.name, param.value)
 
     def _tell_radius(self, edges: Edges, now: float, source: str = "WP_RADIUS?") -> None:
         """Say once (and again if it grows) that the autopilot stops short of its targets."""
