@@ -158,6 +158,10 @@ class VehicleRanges(_Spec):
     accel_mps2: Range = (0.0, 0.0)
     """The autopilot's acceleration and braking limit (ArduPilot's ATC_ACCEL_MAX, 1 m/s/s on Rover);
     0: the suite's vehicles change speed at once."""
+    pivot_angle_deg: Range = (60.0, 60.0)
+    """A rover's heading error above which it turns on the spot (ArduPilot's WP_PIVOT_ANGLE); 180: a
+    rover that cannot, an Ackermann-steered car such as ArduPilot SITL's default rover frame. An
+    AUV never turns on the spot."""
 
 
 class WorldRanges(_Spec):
@@ -408,7 +412,7 @@ def draw_scenario(world_class: WorldClass, seed: int, config: Config | None = No
             "heading_deg": draw.value((0.0, 360.0)) - 180.0,
             "speed_mps": speed,
             "max_turn_rate_dps": 30.0 if auv else 90.0,
-            "pivot_angle_deg": 180.0 if auv else 60.0,
+            "pivot_angle_deg": 180.0,
             "slows_to_turn": auv,
         },
         "detector": {
@@ -428,6 +432,8 @@ def draw_scenario(world_class: WorldClass, seed: int, config: Config | None = No
     world["vehicle"]["position_error_m"] = draw.value(spec.vehicle.position_error_m)
     world["vehicle"]["position_error_s"] = draw.value(spec.vehicle.position_error_s)
     world["vehicle"]["accel_mps2"] = draw.value(spec.vehicle.accel_mps2)
+    if not auv:
+        world["vehicle"]["pivot_angle_deg"] = draw.value(spec.vehicle.pivot_angle_deg)
     service = base.model_copy(
         update={
             "area": base.area.model_validate({**area, "obstacles": obstacles}),

@@ -180,6 +180,22 @@ def test_an_auv_slows_to_turn_and_a_rover_pivots() -> None:
     assert kinds["sub"].slows_to_turn
     assert kinds["sub"].pivot_angle_deg == 180.0
     assert not kinds["rover"].slows_to_turn
+    assert kinds["rover"].pivot_angle_deg == 60.0
+
+
+def test_a_rover_that_cannot_pivot_changes_no_other_draw() -> None:
+    plain = load_class(CLASSES["steady"])
+    car = load_class(CLASSES["steady"], ["world.vehicle.pivot_angle_deg=180"])
+    kinds = set()
+    for seed in range(20):
+        before = draw_scenario(plain, seed).scenario.world
+        after = draw_scenario(car, seed).scenario.world
+        kinds.add(after.vehicle.kind.value)
+        assert after.vehicle.pivot_angle_deg == 180.0
+        assert after.model_copy(update={"vehicle": before.vehicle}) == before
+        pivot = before.vehicle.pivot_angle_deg
+        assert after.vehicle.model_copy(update={"pivot_angle_deg": pivot}) == before.vehicle
+    assert kinds == {"rover", "sub"}
 
 
 def test_a_user_threshold_scales_the_plume() -> None:
