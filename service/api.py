@@ -232,14 +232,9 @@ class Search:
 
     @property
     def arrival_radius_m(self) -> float:
-        """How far short of its targets the autopilot stops: as it said (``tell_arrival_radius``) or
-        as it has been seen to (0 until either)."""
+        """How far short of its targets the autopilot has been seen to stop (0 until it has):
+        setpoints lead it by that much (``planning.lead``)."""
         return self._lead.radius_m
-
-    def tell_arrival_radius(self, radius_m: float) -> bool:
-        """The autopilot's own acceptance radius (ArduPilot Rover's ``WP_RADIUS``), so that
-        setpoints lead it from the start instead of once it has stalled; whether they now do."""
-        return self._lead.tell(radius_m)
 
     def update_map(self, observation: Observation) -> None:
         """Fuse an already aggregated tick into the maps only, without the mission (replay: a

@@ -5,7 +5,8 @@ Tasks, all on one event loop:
   and the tick aggregator; rejected values are counted and logged once per reason;
 - *heartbeat*: HEARTBEAT as the onboard computer at 1 Hz; stream requests when the autopilot
   is first heard and whenever the link comes back; an ArduPilot rover or boat is asked for its
-  acceptance radius (``WP_RADIUS``) until it answers, so that setpoints lead it from the start;
+  acceptance radius (``WP_RADIUS``) until it answers, for the log (setpoints lead a vehicle only
+  once it is seen to stop short of its targets: ``planning.lead``);
 - *tick*: at every tick (absolute deadlines, no drift) the aggregated observation goes through
   the mission step (mapper, state machine, planner); maps, estimate, path and observation are
   published over Zenoh and recorded to MCAP; events become STATUSTEXT and log lines;
@@ -483,8 +484,8 @@ class Service:
 
     def _ask_radius(self, link: VehicleLink) -> None:
         """Ask an ArduPilot rover or boat for its acceptance radius, once a second until it answers
-        (``RADIUS_ASKS`` at most: a lost request is asked again, a vehicle that never answers is
-        left to ``Lead``, which learns the radius from its stops)."""
+        (``RADIUS_ASKS`` at most: a lost request is asked again), for the log: setpoints lead the
+        vehicle only once ``Lead`` has seen it stop short of its targets, whatever it answers."""
         hb = self.gate.last
         if hb is None or hb.autopilot != MAV_AUTOPILOT_ARDUPILOTMEGA or self._radius_asked >= RADIUS_ASKS:
             return
@@ -496,7 +497,10 @@ class Service:
         link.request_param(hb.system, name)
 
     def _on_param(self, edges: Edges, param: ParamValue) -> None:
-        """The acceptance radius the autopilot gave: setpoints lead the vehicle by it from now on."""
+        """The acceptance radius the autopilot gave, said in the log and the recording. It is not
+        taken for how far short the vehicle stops: Rover 4.3 and later drive a guided target to the
+        point and stop within WP_RADIUS only as the approach ends, and setpoints led by it from the
+        start send such a vehicle past every point (docs/search-steps.md, step 48)."""
         if self._radius_param is None or param.name != self._radius_param or param.system != self.gate.system:
             return
         self._radius_asked = RADIUS_ASKS  # answered: not asked again
@@ -504,12 +508,14 @@ class Service:
         if not 0.0 <= param.value <= 100.0:
             log.warning("ignored the autopilot's %s = %g m (not a distance)", param.name, param.value)
             return
-        if self.search.tell_arrival_radius(param.value):
-            self._tell_radius(edges, param.time_s, source=param.name)
-        else:
-            log.info("autopilot's %s is %.2f m: setpoints need not lead it", param.name, param.value)
+        text = (
+            f"autopilot's {param.name} is {param.value:.2f} m; setpoints lead the vehicle only if it is"
+            " seen to stop short of its targets"
+        )
+        log.info("%s", text)
+        edges.recorder.write_event(param.time_s, "autopilot_radius", text, radius_m=param.value)
 
-    def _tell_radius(self, edges: Edges, now: float, source: str = "WP_RADIUS?") -> None:
+    def _tell_radius(self, edges: Edges, now: float, source: str = "seen stopping short") -> None:
         """Say once (and again if it grows) that the autopilot stops short of its targets."""
         radius = self.search.arrival_radius_m
         if radius <= self._radius_told + 0.1:

@@ -1,12 +1,15 @@
 """Guided setpoints for an autopilot that stops short of its targets.
 
-ArduPilot Rover counts a guided target as reached once it is within ``WP_RADIUS`` (2 m by default)
-and holds still there. The mission steers from cell to cell (1.25 m apart on the default area), so
-with such an autopilot the next target is often inside the radius already and the vehicle never
-moves again. The service asks the autopilot for the radius (``tell``); where it does not answer,
-``Lead`` learns the radius from the vehicle's own behaviour, with no setting: a
-vehicle that stays put for ``STALL_S`` while every target it is sent lies ``STALL_MIN_M`` to
-``MAX_RADIUS_M`` away has an acceptance radius at least as large as the farthest. Once the
+An autopilot that counts a guided target as reached once it is within an acceptance radius, and
+holds still there (ArduPilot Rover before 4.3 with ``WP_RADIUS``, 2 m by default), strands a
+mission that steers from cell to cell (1.25 m apart on the default area): the next target is often
+inside the radius already and the vehicle never moves again. ``Lead`` learns the radius from the
+vehicle's own behaviour, with no setting: a vehicle that stays put for ``STALL_S`` while every
+target it is sent lies ``STALL_MIN_M`` to ``MAX_RADIUS_M`` away has an acceptance radius at least
+as large as the farthest. The radius the autopilot states is not taken for it: Rover 4.3 and later
+drive a guided target all the way to the point (position-controller input shaping) and stop within
+``WP_RADIUS`` only as the approach ends, and a vehicle led by that radius from the start is sent
+past every point, and a car-like one round a point it is sent past (docs/search-steps.md, step 48). Once the
 radius r is known, each setpoint is the first point of the plan ``r + LEAD_MARGIN_M`` away (pure
 pursuit); a point of the plan nearer than that (its end, or a corner round an obstacle) is overrun
 by ``r + OVERRUN_M`` along the line of sight, so that the vehicle drives through it and stops just
@@ -164,14 +167,6 @@ class Lead:
         else:
             self._since = None
         return target
-
-    def tell(self, radius_m: float) -> bool:
-        """The radius as the autopilot gives it; one no larger than ``THERE_M`` (the mission's own
-        arrival distance) needs no lead. A larger radius learnt from the vehicle's stops stands.
-        Whether setpoints now lead the vehicle."""
-        if radius_m > THERE_M:
-            self.radius_m = max(self.radius_m, radius_m)
-        return self.radius_m > 0.0
 
     def planning_point(self, t_s: float, x: float, y: float, plan: Sequence[Waypoint]) -> tuple[float, float]:
         """Where the mission should plan from at ``t_s``: (x, y), or the plan's end for a vehicle

@@ -208,8 +208,6 @@ def run_mission(
         return within_one_cell(grid, *grid.centre(cell), *source)
 
     search = Search(config, admit=at_source if oracle else None)
-    # the service asks an ArduPilot rover for its WP_RADIUS as the link comes up (service.app.service)
-    search.tell_arrival_radius(scenario.world.vehicle.arrival_radius_m)
     steps_per_tick = max(1, round(config.mapping.tick_s / world.dt_s))
     sample_every = max(1, round(1.0 / (config.mavlink.stream_hz * world.dt_s)))
     command_every = max(1, round(1.0 / (config.mavlink.setpoint_rate_hz * world.dt_s)))

@@ -362,19 +362,14 @@ def run_with_vehicle(
     return link, recorder, service
 
 
-def test_an_ardupilot_rover_is_asked_for_its_acceptance_radius_until_it_answers() -> None:
-    # the first request is lost: the second is answered, and setpoints lead the rover from then on
-    link, recorder, service = run_with_vehicle(RADIUS_ASKS + 4.0, answer_after=2)
+@pytest.mark.parametrize("radius_m", [0.5, 2.0])
+def test_an_ardupilot_rover_is_asked_for_its_acceptance_radius_until_it_answers(radius_m: float) -> None:
+    # the first request is lost, the second answered; the answer is said in the recording, and the
+    # setpoints stay the plan's own points: a Rover since 4.3 drives onto its guided targets, and
+    # only a vehicle seen to stop short of them is led
+    link, recorder, service = run_with_vehicle(RADIUS_ASKS + 4.0, answer_after=2, radius_m=radius_m)
     assert link.of("param") == [(1, "WP_RADIUS")] * 2
-    assert service.search.arrival_radius_m == pytest.approx(2.0)
-    assert recorder.events.count("arrival_radius") == 1
-
-
-def test_a_radius_the_mission_reaches_anyway_is_not_led() -> None:
-    # WP_RADIUS 0.5 (what the README advises): the autopilot stops where the mission counts a point
-    # as reached, so setpoints stay the plan's own points
-    link, recorder, service = run_with_vehicle(4.0, answer_after=1, radius_m=0.5)
-    assert link.of("param") == [(1, "WP_RADIUS")]
+    assert recorder.events.count("autopilot_radius") == 1
     assert service.search.arrival_radius_m == 0.0
     assert "arrival_radius" not in recorder.events
 

@@ -24,9 +24,9 @@ DEVELOPED = ["world.plume.spin_up_s=300", "world.plume.spin_up_step_s=1.0"]
         # mission then crosses the flow just upflow of it (seed 12 declares at 78 s in process,
         # and every one of seeds 0-15 declared within 115 s over loopback under load)
         (12, [*DEVELOPED], 10.0),
-        # ArduPilot Rover's default WP_RADIUS: the service asks the stub for it (PARAM_REQUEST_READ)
-        # and leads its setpoints from the start (seed 4: 85 s in process, 91 s over loopback under
-        # load when the radius was learnt from the vehicle's stops)
+        # An autopilot that holds still 2 m short of its guided targets (Rover before 4.3 at its
+        # default WP_RADIUS): the service asks the stub for the radius (PARAM_REQUEST_READ) and
+        # says it, and leads its setpoints once it has seen the vehicle stop short
         (4, [*DEVELOPED, "world.vehicle.arrival_radius_m=2"], 10.0),
     ],
     ids=["drives-onto-targets", "stops-2-m-short"],

@@ -94,22 +94,6 @@ def test_a_vehicle_stopped_short_teaches_the_radius_and_is_then_led() -> None:
     assert ahead.x == 7.0
 
 
-def test_a_radius_the_autopilot_gives_leads_from_the_start() -> None:
-    lead = Lead(GRID)
-    assert not lead.tell(0.5)  # stops where the mission counts a point reached: no lead
-    assert lead.radius_m == 0.0
-    assert lead.tell(2.0)
-    plan = (Waypoint(7.0, 5.0),)
-    end = lead.setpoint(0.0, 6.0, 5.0, plan)
-    assert end is not None
-    assert (end.x, end.y) == (pytest.approx(7.0 + 2.0 + OVERRUN_M), 5.0)
-    # a larger radius seen in the vehicle's stops stands against a smaller one it is told
-    _stand(lead, 6.0, (Waypoint(9.0, 5.0),), STALL_S + 1.0, start=10.0)
-    assert lead.radius_m == pytest.approx(3.0)
-    assert lead.tell(2.0)
-    assert lead.radius_m == pytest.approx(3.0)
-
-
 def test_a_hold_is_driven_to_and_teaches_nothing() -> None:
     # a vehicle stopped 2 m short of the point it is to hold on is sent through it, to stop just
     # past it (held at a free cell's centre inside its radius, it would never move); standing on
