@@ -8,14 +8,13 @@ vehicle's own behaviour, with no setting: a vehicle that stays put for ``STALL_S
 target it is sent lies ``STALL_MIN_M`` to ``MAX_RADIUS_M`` away has an acceptance radius at least
 as large as the farthest. The radius the autopilot states is not taken for it: Rover 4.3 and later
 drive a guided target all the way to the point (position-controller input shaping) and stop within
-``WP_RADIUS`` only as the approach ends, and a vehicle led by that radius from the start is sent
-past every point, and a car-like one round a point it is sent past (docs/search-steps.md, step 48). Once the
-radius r is known, each setpoint is the first point of the plan ``r + LEAD_MARGIN_M`` away (pure
-pursuit); a point of the plan nearer than that (its end, or a corner round an obstacle) is overrun
-by ``r + OVERRUN_M`` along the line of sight, so that the vehicle drives through it and stops just
-past it, not r short of it.
-While r is 0 (a vehicle that drives onto its targets, as the simulator's and ArduCopter's do) the
-setpoint is the plan's first waypoint, as it always was.
+``WP_RADIUS`` only as the approach ends; a vehicle led by that radius from the start is sent past
+every point, and a car-like one circles a point it is sent past (docs/search-steps.md, step 48).
+Once the radius r is known, each setpoint is the first point of the plan ``r + LEAD_MARGIN_M``
+away (pure pursuit); a point of the plan nearer than that (its end, or a corner round an obstacle)
+is overrun by ``r + OVERRUN_M`` along the line of sight, so that the vehicle drives through it and
+stops just past it, not r short of it. While r is 0 (a vehicle that drives onto its targets, as the
+simulator's, ArduCopter's and Rover's since 4.3 do) the setpoint is the plan's first waypoint.
 
 Every setpoint passes the safety rule (``planning.safety``): inside the area, outside every
 obstacle, with a clear straight leg from the vehicle; where a lead point fails, the farthest
