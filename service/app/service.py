@@ -61,12 +61,16 @@ STREAMS = {"LOCAL_POSITION_NED": 32, "WIND": 168, "WIND_COV": 231}
 """Messages the service asks the autopilot for (MAVLink message ids)."""
 
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
-RADIUS_PARAMS = {10: "WP_RADIUS", 11: "WP_RADIUS"}
-"""MAV_TYPE (ground rover, surface boat) -> the ArduPilot parameter within which the vehicle counts
-a guided target as reached and stops. ArduCopter and ArduSub fly onto their targets."""
-RADIUS_ASKS = 5
-"""How many times (one a second) the acceptance radius is asked for before ``Lead`` is left to
-learn it from the vehicle's stops."""
+ROVER_TYPES = frozenset({10, 11})
+"""MAV_TYPE of an ArduPilot Rover (ground rover, surface boat), whose parameters are asked for."""
+ROVER_PARAMS = ("WP_RADIUS", "WP_SPEED", "CRUISE_SPEED")
+"""Asked of a Rover as the link comes up: its acceptance radius (logged), and the guided speed it
+drives at (``WP_SPEED``, or ``CRUISE_SPEED`` while that is 0), which ``vehicle.max_speed_mps`` caps."""
+PARAM_ASKS = 5
+"""How many times (one a second) the parameters not yet answered are asked for."""
+SPEED_EVERY_S = 5.0
+"""While commanding, the speed cap is sent again this often: Rover applies it only to a guided
+target it is driving to, and forgets it when GUIDED is entered again."""
 
 
 def request_streams(link: VehicleLink, system: int, settings: TelemetrySettings, rate_hz: float) -> list[str]:
@@ -179,10 +183,13 @@ class Service:
         self._gate_state = GateState(False, "starting")
         self._link_was_alive = False
         self._radius_told = 0.0
-        self._radius_asked = 0
+        self._param_asks = 0
         self._lag_warned = False
-        self._radius_param: str | None = None
-        """The acceptance radius's parameter asked of the autopilot until it answers (None: none)."""
+        self._params: dict[str, float] = {}
+        """``ROVER_PARAMS`` as the autopilot answered them."""
+        self._speed_cap: float | None = None
+        """The guided speed asked of a Rover that drives faster than ``vehicle.max_speed_mps``."""
+        self._speed_sent: float | None = None
         self._signing_key = (
             load_signing_key(config.mavlink.signing_key_file) if config.mavlink.signing_key_file else None
         )
@@ -315,7 +322,7 @@ class Service:
                 log.info("autopilot %d heard: requested %s at %.1f Hz", self.gate.system, ", ".join(streams),
                          rate_hz)  # fmt: skip
             if alive:
-                self._ask_radius(link)
+                self._ask_params(link)
             self._link_was_alive = alive
             await self.clock.sleep_until(now + 1.0)
 
@@ -458,6 +465,8 @@ class Service:
     def _command(self, edges: Edges, now: float) -> bool:
         """Send the current target if allowed and safe; True when a setpoint went out."""
         system = self.gate.system
+        if not self._gate_state.allowed:
+            self._speed_sent = None  # GUIDED entered again forgets the speed: ask at once
         if self.target is None or system is None or not self._gate_state.allowed:
             return False
         # the plan's first waypoint, or a point ahead of an autopilot that stops short of it
@@ -480,40 +489,63 @@ class Service:
         self.stats.setpoints += 1
         edges.recorder.write_setpoint(now, target.x, target.y, cfg.altitude_m)
         self._tell_radius(edges, now)
+        due = self._speed_sent is None or now - self._speed_sent >= SPEED_EVERY_S
+        if self._speed_cap is not None and due:
+            edges.link.send_speed(system, self._speed_cap)
+            self._speed_sent = now
         return True
 
-    def _ask_radius(self, link: VehicleLink) -> None:
-        """Ask an ArduPilot rover or boat for its acceptance radius, once a second until it answers
-        (``RADIUS_ASKS`` at most: a lost request is asked again), for the log: setpoints lead the
-        vehicle only once ``Lead`` has seen it stop short of its targets, whatever it answers."""
+    def _ask_params(self, link: VehicleLink) -> None:
+        """Ask an ArduPilot Rover for ``ROVER_PARAMS`` not yet answered, once a second
+        (``PARAM_ASKS`` rounds at most: a lost request is asked again)."""
         hb = self.gate.last
-        if hb is None or hb.autopilot != MAV_AUTOPILOT_ARDUPILOTMEGA or self._radius_asked >= RADIUS_ASKS:
+        if hb is None or hb.autopilot != MAV_AUTOPILOT_ARDUPILOTMEGA or hb.vehicle_type not in ROVER_TYPES:
             return
-        name = RADIUS_PARAMS.get(hb.vehicle_type)
-        if name is None:
+        wanted = [name for name in ROVER_PARAMS if name not in self._params]
+        if not wanted or self._param_asks >= PARAM_ASKS:
             return
-        self._radius_param = name
-        self._radius_asked += 1
-        link.request_param(hb.system, name)
+        self._param_asks += 1
+        for name in wanted:
+            link.request_param(hb.system, name)
 
     def _on_param(self, edges: Edges, param: ParamValue) -> None:
-        """The acceptance radius the autopilot gave, said in the log and the recording. It is not
-        taken for how far short the vehicle stops: Rover 4.3 and later drive a guided target to the
-        point and stop within WP_RADIUS only as the approach ends, and setpoints led by it from the
-        start send such a vehicle past every point (docs/search-steps.md, step 48)."""
-        if self._radius_param is None or param.name != self._radius_param or param.system != self.gate.system:
+        """A parameter the autopilot answered. ``WP_RADIUS`` is said in the log and the recording,
+        not taken for how far short the vehicle stops: Rover 4.3 and later drive a guided target to
+        the point and stop within it only as the approach ends, and setpoints led by it from the
+        start send such a vehicle past every point (docs/search-steps.md, step 48). The speeds set
+        the cap (``_cap_speed``)."""
+        if param.name not in ROVER_PARAMS or param.name in self._params or param.system != self.gate.system:
             return
-        self._radius_asked = RADIUS_ASKS  # answered: not asked again
-        self._radius_param = None
         if not 0.0 <= param.value <= 100.0:
-            log.warning("ignored the autopilot's %s = %g m (not a distance)", param.name, param.value)
+            log.warning("ignored the autopilot's %s = %g (not a distance or speed)", param.name, param.value)
             return
-        text = (
-            f"autopilot's {param.name} is {param.value:.2f} m; setpoints lead the vehicle only if it is"
-            " seen to stop short of its targets"
-        )
-        log.info("%s", text)
-        edges.recorder.write_event(param.time_s, "autopilot_radius", text, radius_m=param.value)
+        self._params[param.name] = param.value
+        if param.name == "WP_RADIUS":
+            text = (
+                f"autopilot's {param.name} is {param.value:.2f} m; setpoints lead the vehicle only if it is"
+                " seen to stop short of its targets"
+            )
+            log.info("%s", text)
+            edges.recorder.write_event(param.time_s, "autopilot_radius", text, radius_m=param.value)
+        else:
+            self._cap_speed(edges, param.time_s)
+
+    def _cap_speed(self, edges: Edges, now: float) -> None:
+        """Once the Rover's guided speed is known (``WP_SPEED``, or ``CRUISE_SPEED`` while it is 0):
+        if it is faster than ``vehicle.max_speed_mps``, ask for that speed while commanding. The
+        map is updated once a second on cells of a metre or so, and the search was measured at
+        0.5-2 m/s; at 5 m/s (SITL's CRUISE_SPEED) it reaches sources and fails to name them (step
+        48). A slower vehicle is never sped up."""
+        cap = self.config.vehicle.max_speed_mps
+        wp_speed = self._params.get("WP_SPEED")
+        speed = wp_speed if wp_speed else self._params.get("CRUISE_SPEED")
+        if wp_speed is None or speed is None or cap <= 0.0 or speed <= cap:
+            return
+        self._speed_cap = cap
+        text = f"autopilot drives at {speed:.1f} m/s in GUIDED: asked for {cap:.1f} m/s"
+        text += " (vehicle.max_speed_mps)"
+        log.warning("%s", text)
+        edges.recorder.write_event(now, "speed_cap", text, speed_mps=speed, cap_mps=cap)
 
     def _tell_radius(self, edges: Edges, now: float, source: str = "seen stopping short") -> None:
         """Say once (and again if it grows) that the autopilot stops short of its targets."""

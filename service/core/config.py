@@ -30,6 +30,10 @@ class VehicleConfig(_Section):
     In the last tick within it the service names the map's estimate as
     ``declaration.final_probability`` says, stating the map's mass within ``declaration.radius_m``
     of it as its confidence (``oslim bench suite`` passes each world's time limit)."""
+    max_speed_mps: float = Field(default=2.0, ge=0, le=100)
+    """The fastest guided speed the search asks of an ArduPilot Rover (MAV_CMD_DO_CHANGE_SPEED
+    while commanding, when its ``WP_SPEED``, or ``CRUISE_SPEED`` while that is 0, is faster); a
+    slower vehicle is never sped up. 0: never asked."""
 
 
 class MavlinkConfig(_Section):

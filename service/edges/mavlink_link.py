@@ -30,6 +30,7 @@ log = logging.getLogger(__name__)
 MAV_COMP_ID_ONBOARD_COMPUTER = 191
 MAV_FRAME_LOCAL_NED = 1
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_CMD_DO_CHANGE_SPEED = 178
 _UNUSED_TARGET_FIELDS = (0.0,) * 8
 """vx, vy, vz, afx, afy, afz, yaw, yaw_rate: ignored under a position-only type_mask."""
 
@@ -199,6 +200,15 @@ class MavlinkLink:
         """PARAM_REQUEST_READ of one parameter by name (the autopilot answers with PARAM_VALUE)."""
         m = self._mav
         self._send(m.MAVLink_param_request_read_message(target_system, 1, name.encode("ascii"), -1))
+
+    def send_speed(self, target_system: int, speed_mps: float) -> None:
+        """MAV_CMD_DO_CHANGE_SPEED (178) as COMMAND_LONG: ground speed ``speed_mps``, throttle unchanged."""
+        m = self._mav
+        self._send(
+            m.MAVLink_command_long_message(
+                target_system, 1, MAV_CMD_DO_CHANGE_SPEED, 0, 1, speed_mps, -1, 0, 0, 0, 0
+            )
+        )
 
     def send_setpoint(
         self, target_system: int, time_ms: int, x_m: float, y_m: float, altitude_m: float, type_mask: int

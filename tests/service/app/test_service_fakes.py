@@ -13,7 +13,7 @@ import pytest
 
 from service.api import Search
 from service.app.edges import Edges
-from service.app.service import RADIUS_ASKS, STREAMS, Clock, Service
+from service.app.service import PARAM_ASKS, ROVER_PARAMS, STREAMS, Clock, Service
 from service.core.config import Config, build_config
 from service.core.errors import LinkError
 from service.core.observation import Observation
@@ -72,6 +72,9 @@ class FakeLink:
 
     def request_param(self, target_system: int, name: str) -> None:
         self.sent.append(("param", (target_system, name)))
+
+    def send_speed(self, target_system: int, speed_mps: float) -> None:
+        self.sent.append(("speed", (target_system, speed_mps)))
 
     def send_setpoint(
         self, target_system: int, time_ms: int, x_m: float, y_m: float, altitude_m: float, type_mask: int
@@ -330,19 +333,27 @@ def test_an_autopilot_that_stops_short_is_led_and_told_of_once() -> None:
 
 
 def run_with_vehicle(
-    seconds: float, *, mav_type: int = 10, answer_after: int | None = None, radius_m: float = 2.0
+    seconds: float,
+    *,
+    mav_type: int = 10,
+    answer_after: int | None = None,
+    answers: dict[str, float] | None = None,
 ) -> tuple[FakeLink, FakeRecorder, Service]:
-    """The service ``seconds`` (service time) with ``vehicle``; the autopilot answers the
-    ``answer_after``-th request of WP_RADIUS with ``radius_m`` (None: it never answers)."""
+    """The service ``seconds`` (service time) with ``vehicle``; the autopilot answers each parameter
+    of ``answers`` at its ``answer_after``-th request (None: it never answers)."""
     link, _, recorder, edges = fakes()
     service = Service(Config(), clock=Clock(SPEED))
+    wanted = answers or {}
 
     async def autopilot_params() -> None:
-        while answer_after is not None:
-            if len(link.of("param")) >= answer_after:
-                value = FakeMessage("PARAM_VALUE", param_id=b"WP_RADIUS", param_value=radius_m)
-                link.inbox.put_nowait((service.clock.now(), value))
-                return
+        answered: set[str] = set()
+        while answer_after is not None and len(answered) < len(wanted):
+            asked = [name for _, name in link.of("param")]
+            for name, value in wanted.items():
+                if name not in answered and asked.count(name) >= answer_after:
+                    reply = FakeMessage("PARAM_VALUE", param_id=name.encode(), param_value=value)
+                    link.inbox.put_nowait((service.clock.now(), reply))
+                    answered.add(name)
             await asyncio.sleep(0.002)
 
     async def body() -> None:
@@ -367,17 +378,43 @@ def test_an_ardupilot_rover_is_asked_for_its_acceptance_radius_until_it_answers(
     # the first request is lost, the second answered; the answer is said in the recording, and the
     # setpoints stay the plan's own points: a Rover since 4.3 drives onto its guided targets, and
     # only a vehicle seen to stop short of them is led
-    link, recorder, service = run_with_vehicle(RADIUS_ASKS + 4.0, answer_after=2, radius_m=radius_m)
-    assert link.of("param") == [(1, "WP_RADIUS")] * 2
+    answers = {"WP_RADIUS": radius_m}
+    link, recorder, service = run_with_vehicle(PARAM_ASKS + 4.0, answer_after=2, answers=answers)
+    asked = [name for _, name in link.of("param")]
+    assert asked.count("WP_RADIUS") == 2
+    assert asked.count("WP_SPEED") == PARAM_ASKS  # never answered: asked each round
     assert recorder.events.count("autopilot_radius") == 1
     assert service.search.arrival_radius_m == 0.0
     assert "arrival_radius" not in recorder.events
 
 
-def test_an_autopilot_that_never_answers_is_asked_a_few_times_then_left_to_the_learning() -> None:
-    link, _, service = run_with_vehicle(RADIUS_ASKS + 4.0)
-    assert link.of("param") == [(1, "WP_RADIUS")] * RADIUS_ASKS
+def test_an_autopilot_that_never_answers_is_asked_a_few_times() -> None:
+    link, _, service = run_with_vehicle(PARAM_ASKS + 4.0)
+    assert sorted(link.of("param")) == sorted([(1, name) for name in ROVER_PARAMS] * PARAM_ASKS)
     assert service.search.arrival_radius_m == 0.0
+    assert link.of("speed") == []
+
+
+def test_a_rover_at_sitl_cruise_speed_is_asked_to_slow_down_while_commanded() -> None:
+    # SITL's rover.parm: WP_SPEED 0, so guided targets are driven at CRUISE_SPEED 5 m/s; the service
+    # asks for vehicle.max_speed_mps (2 m/s) with every setpoint stream, again every SPEED_EVERY_S
+    answers = {"WP_RADIUS": 3.0, "WP_SPEED": 0.0, "CRUISE_SPEED": 5.0}
+    link, recorder, _ = run_with_vehicle(16.0, answer_after=1, answers=answers)
+    sent = link.of("speed")
+    assert len(sent) >= 2
+    assert set(sent) == {(1, 2.0)}
+    assert recorder.events.count("speed_cap") == 1
+
+
+@pytest.mark.parametrize(
+    "answers",
+    [{"WP_SPEED": 1.5, "CRUISE_SPEED": 5.0}, {"WP_SPEED": 0.0, "CRUISE_SPEED": 1.0}, {"CRUISE_SPEED": 5.0}],
+    ids=["wp-speed-slower", "cruise-slower", "wp-speed-unknown"],
+)
+def test_a_slower_or_unknown_speed_is_left_alone(answers: dict[str, float]) -> None:
+    link, recorder, _ = run_with_vehicle(12.0, answer_after=1, answers=answers)
+    assert link.of("speed") == []
+    assert "speed_cap" not in recorder.events
 
 
 def test_a_vehicle_that_flies_onto_its_targets_is_not_asked() -> None:
