@@ -382,8 +382,8 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> None:
         default=0.0,
         metavar="M",
         help="every simulated vehicle stops M m short of its targets, as ArduPilot Rover does within "
-        "WP_RADIUS (2 m by default), and the search is told M, as the service reads WP_RADIUS from the "
-        "autopilot; default 0: they drive onto them",
+        "WP_RADIUS (2 m by default) before 4.3; the search learns M from their stops, as the service does; "
+        "default 0: they drive onto them",
     )
     _add_time_scale(
         w,

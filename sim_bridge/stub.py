@@ -49,6 +49,12 @@ POSITION_TYPE_MASKS = frozenset({3576, 3580})
 """Position-only SET_POSITION_TARGET_LOCAL_NED masks: x, y, z (3576) and x, y (3580, Rover)."""
 
 
+def _text(raw: str | bytes) -> str:
+    """A MAVLink char[] field as text, without its NUL padding."""
+    text = raw if isinstance(raw, str) else bytes(raw).decode(errors="replace")
+    return text.rstrip("\x00")
+
+
 class Stream(StrEnum):
     """The telemetry streams, named by the MAVLink message that carries them."""
 
@@ -462,17 +468,15 @@ class VehicleStub:
         """A companion or GCS heartbeat: nothing to do (ArduPilot only tracks it for failsafes)."""
 
     def _on_statustext(self, msg: Any) -> None:
-        text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode(errors="replace")
-        self._texts.append(StatusText(self._sim_now_s, int(msg.severity), text.rstrip("\x00")))
+        text = _text(msg.text)
+        self._texts.append(StatusText(self._sim_now_s, int(msg.severity), text))
         log.info("STATUSTEXT from %d/%d: %s", msg.get_srcSystem(), msg.get_srcComponent(), text)
 
     def _on_param_request(self, msg: Any) -> None:
         """PARAM_VALUE for the one parameter the stub has (a rover's WP_RADIUS); as ArduPilot, no
         answer for a name it does not know."""
         name = self._autopilot.radius_param
-        raw = msg.param_id
-        wanted = (raw if isinstance(raw, str) else bytes(raw).decode(errors="replace")).rstrip("\x00")
-        by_name = msg.param_index == -1 and wanted == name
+        by_name = msg.param_index == -1 and _text(msg.param_id) == name
         if name is None or not (by_name or msg.param_index == 0):
             return
         radius = self.world.vehicle_params.arrival_radius_m

@@ -467,7 +467,8 @@ class Service:
         system = self.gate.system
         if not self._gate_state.allowed:
             self._speed_sent = None  # GUIDED entered again forgets the speed: ask at once
-        if self.target is None or system is None or not self._gate_state.allowed:
+            return False
+        if self.target is None or system is None:
             return False
         # the plan's first waypoint, or a point ahead of an autopilot that stops short of it
         point = self.search.setpoint(now)
@@ -547,13 +548,14 @@ class Service:
         log.warning("%s", text)
         edges.recorder.write_event(now, "speed_cap", text, speed_mps=speed, cap_mps=cap)
 
-    def _tell_radius(self, edges: Edges, now: float, source: str = "seen stopping short") -> None:
+    def _tell_radius(self, edges: Edges, now: float) -> None:
         """Say once (and again if it grows) that the autopilot stops short of its targets."""
         radius = self.search.arrival_radius_m
         if radius <= self._radius_told + 0.1:
             return
         self._radius_told = radius
-        text = f"autopilot stops {radius:.1f} m short of its targets ({source}): setpoints now lead it"
+        text = f"autopilot stops {radius:.1f} m short of its targets (seen stopping short): "
+        text += "setpoints now lead it"
         log.warning("%s", text)
         edges.recorder.write_event(now, "arrival_radius", text, radius_m=radius)
 
