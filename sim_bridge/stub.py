@@ -3,12 +3,13 @@
 System 1, component 1, MAVLink 2 (ardupilotmega dialect). It sends HEARTBEAT with
 MAV_AUTOPILOT_ARDUPILOTMEGA, a rover or submarine type and ArduPilot's custom_mode; honours
 SET_MODE and MAV_CMD_DO_SET_MODE, MAV_CMD_COMPONENT_ARM_DISARM, MAV_CMD_SET_MESSAGE_INTERVAL and
-MAV_CMD_REQUEST_MESSAGE with COMMAND_ACK; answers PARAM_REQUEST_READ of a rover's WP_RADIUS (the
-world's arrival radius) with PARAM_VALUE; streams LOCAL_POSITION_NED, the flow at the vehicle as
-WIND (as ArduPilot) and WIND_COV (as PX4), NAMED_VALUE_FLOAT "CHEM" and, when asked,
-NAMED_VALUE_INT "CHEM_DET"; drives toward the latest SET_POSITION_TARGET_LOCAL_NED
-(MAV_FRAME_LOCAL_NED, type_mask 3576 or 3580) only while armed in GUIDED. Anything malformed or
-unexpected is counted and ignored, never fatal.
+MAV_CMD_REQUEST_MESSAGE with COMMAND_ACK, and in GUIDED MAV_CMD_DO_CHANGE_SPEED (kept until the mode
+changes, as Rover does); answers PARAM_REQUEST_READ of a rover's WP_RADIUS (the world's arrival
+radius), WP_SPEED and CRUISE_SPEED (its cruise speed) with PARAM_VALUE; streams
+LOCAL_POSITION_NED, the flow at the vehicle as WIND (as ArduPilot) and WIND_COV (as PX4),
+NAMED_VALUE_FLOAT "CHEM" and, when asked, NAMED_VALUE_INT "CHEM_DET"; drives toward the latest
+SET_POSITION_TARGET_LOCAL_NED (MAV_FRAME_LOCAL_NED, type_mask 3576 or 3580) only while armed in
+GUIDED. Anything malformed or unexpected is counted and ignored, never fatal.
 
 Time is simulated: the world advances ``speed`` simulated seconds per wall second, stream
 intervals are simulated time and time_boot_ms is the simulated time since the world started,
@@ -472,15 +473,30 @@ class VehicleStub:
         self._texts.append(StatusText(self._sim_now_s, int(msg.severity), text))
         log.info("STATUSTEXT from %d/%d: %s", msg.get_srcSystem(), msg.get_srcComponent(), text)
 
+    def _params(self) -> dict[str, float]:
+        """The parameters the stub has: a rover's acceptance radius (the world's arrival radius)
+        and its guided speed, WP_SPEED and CRUISE_SPEED both the cruise speed; a submarine none."""
+        radius = self._autopilot.radius_param
+        if radius is None:
+            return {}
+        p = self.world.vehicle_params
+        return {radius: p.arrival_radius_m, "WP_SPEED": p.speed_mps, "CRUISE_SPEED": p.speed_mps}
+
     def _on_param_request(self, msg: Any) -> None:
-        """PARAM_VALUE for the one parameter the stub has (a rover's WP_RADIUS); as ArduPilot, no
-        answer for a name it does not know."""
-        name = self._autopilot.radius_param
-        by_name = msg.param_index == -1 and _text(msg.param_id) == name
-        if name is None or not (by_name or msg.param_index == 0):
+        """PARAM_VALUE for one of ``_params``, by name or index; as ArduPilot, no answer for a name it
+        does not know."""
+        params = self._params()
+        names = list(params)
+        if msg.param_index == -1:
+            name = _text(msg.param_id)
+        elif 0 <= msg.param_index < len(names):
+            name = names[msg.param_index]
+        else:
             return
-        radius = self.world.vehicle_params.arrival_radius_m
-        self._send("param_value", name.encode(), radius, self._dialect.MAV_PARAM_TYPE_REAL32, 1, 0)
+        if name not in params:
+            return
+        real32 = self._dialect.MAV_PARAM_TYPE_REAL32
+        self._send("param_value", name.encode(), params[name], real32, len(names), names.index(name))
 
     def pilot_mode(self, custom_mode: int) -> bool:
         """The pilot's mode switch (RC or ground station): False for a mode the vehicle lacks."""
@@ -499,8 +515,9 @@ class VehicleStub:
             log.info(
                 "mode %s -> %s", self._autopilot.mode_name(self._mode), self._autopilot.mode_name(custom_mode)
             )
-            # ArduPilot drops the guided target when the mode changes; a new GUIDED holds position
+            # ArduPilot drops the guided target and speed when the mode changes; a new GUIDED holds
             self.world.target_m = None
+            self.world.speed_mps = None
         self._mode = custom_mode
         return True
 
@@ -519,6 +536,7 @@ class VehicleStub:
             mav.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm_disarm,
             mav.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_set_message_interval,
             mav.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
+            mav.MAV_CMD_DO_CHANGE_SPEED: self._cmd_change_speed,
         }
         command = int(msg.command)
         params = (msg.param1, msg.param2, msg.param3, msg.param4)
@@ -544,6 +562,16 @@ class VehicleStub:
         if wanted != self._armed:
             log.info("%s", "armed" if wanted else "disarmed")
         self._armed = wanted
+        return int(mav.MAV_RESULT_ACCEPTED)
+
+    def _cmd_change_speed(self, msg: Any) -> int:
+        """Drive guided targets at param2 m/s (no faster than the cruise speed) until the mode
+        changes; a speed of 0 or less keeps the current one. Only in GUIDED, as Rover."""
+        mav = self._dialect
+        if not self.guided:
+            return int(mav.MAV_RESULT_FAILED)
+        if msg.param2 > 0:
+            self.world.speed_mps = float(msg.param2)
         return int(mav.MAV_RESULT_ACCEPTED)
 
     def _stream_of(self, message_id: float) -> Stream | None:

@@ -103,8 +103,11 @@ def step(
     params: VehicleParams,
     dt_s: float,
     obstacles: tuple[Rectangle, ...] = (),
+    speed_mps: float | None = None,
 ) -> VehicleState:
-    """One kinematic step of ``dt_s`` toward ``target_m``; no target means stay put."""
+    """One kinematic step of ``dt_s`` toward ``target_m``; no target means stay put. ``speed_mps``:
+    the speed asked of the autopilot (MAV_CMD_DO_CHANGE_SPEED), below the cruise speed; None: the
+    cruise speed. A vehicle that brakes (``accel_mps2``) sheds speed no faster than that."""
     still = replace(state, vx_mps=0.0, vy_mps=0.0, blocked=False)
     if target_m is None:
         return still
@@ -130,7 +133,10 @@ def step(
     elif pivot:
         return replace(still, heading_rad=heading)
     else:
-        reach = params.speed_mps * dt_s
+        cruise = params.speed_mps if speed_mps is None else min(params.speed_mps, speed_mps)
+        if accel > 0.0 and moving > cruise:
+            cruise = max(cruise, moving - accel * dt_s)
+        reach = cruise * dt_s
         if params.slows_to_turn:
             reach *= max(math.cos(error), _LEAST_TURN_SPEED)
         if accel > 0.0:

@@ -50,6 +50,9 @@ class World:
         """Where the vehicle is driving to; None: stay put."""
         self.driving = False
         """Whether the vehicle may move (the stub sets it: GUIDED and armed)."""
+        self.speed_mps: float | None = None
+        """The guided speed asked of the vehicle (MAV_CMD_DO_CHANGE_SPEED); None: its cruise speed.
+        A faster speed than the cruise is not reached."""
         self.distance_m = 0.0
         """Odometer: the length of the vehicle's track so far."""
         self._steps = 0
@@ -68,7 +71,8 @@ class World:
         if target is not None and (east or north):  # the autopilot steers its belief onto the target
             target = (target[0] - east, target[1] - north)
         before = self.vehicle
-        self.vehicle = kinematics.step(before, target, self.vehicle_params, dt, self.obstacles)
+        params = self.vehicle_params
+        self.vehicle = kinematics.step(before, target, params, dt, self.obstacles, self.speed_mps)
         self.distance_m += math.hypot(self.vehicle.x_m - before.x_m, self.vehicle.y_m - before.y_m)
         self.flow.advance(dt)
         if self.detector.lags:

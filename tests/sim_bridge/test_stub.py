@@ -153,7 +153,30 @@ def test_a_parameter_the_vehicle_lacks_gets_no_answer(fly: Fly) -> None:
         return talk
 
     assert not fly(wang("world.vehicle.arrival_radius_m=2"), asking(b"WP_RADIUS"), kind=VehicleKind.SUB)
-    assert not fly(wang(), asking(b"WP_SPEED"))
+    assert not fly(wang(), asking(b"WP_PIVOT_RATE"))
+
+
+def test_a_rover_reports_its_guided_speed_and_takes_a_slower_one_in_guided(fly: Fly) -> None:
+    # the wang rover cruises at 2 m/s (WP_SPEED and CRUISE_SPEED); asked for 1 m/s in GUIDED it
+    # drives its target at that speed until the mode changes; outside GUIDED the command fails
+    def talk(c: Any, stub: VehicleStub) -> tuple[Any, ...]:
+        c.recv("HEARTBEAT")
+        c.conn.mav.param_request_read_send(1, 1, b"CRUISE_SPEED", -1)
+        cruise = c.recv("PARAM_VALUE")
+        c.conn.mav.param_request_read_send(1, 1, b"", 1)
+        by_index = c.recv("PARAM_VALUE")
+        refused = c.command(MAV.MAV_CMD_DO_CHANGE_SPEED, 1, 1.0, -1)
+        c.guided_and_armed()
+        accepted = c.command(MAV.MAV_CMD_DO_CHANGE_SPEED, 1, 1.0, -1)
+        asked = stub.world.speed_mps
+        c.command(MAV.MAV_CMD_DO_SET_MODE, MAV.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4)  # HOLD
+        return cruise, by_index, refused, accepted, asked, stub.world.speed_mps
+
+    cruise, by_index, refused, accepted, asked, after = fly(wang(), talk)
+    assert (cruise.param_id, cruise.param_value, cruise.param_count) == ("CRUISE_SPEED", 2.0, 3)
+    assert (by_index.param_id, by_index.param_value, by_index.param_index) == ("WP_SPEED", 2.0, 1)
+    assert (refused.result, accepted.result) == (MAV.MAV_RESULT_FAILED, MAV.MAV_RESULT_ACCEPTED)
+    assert (asked, after) == (1.0, None)
 
 
 def test_moves_toward_a_setpoint_at_the_configured_speed_and_stops_there(fly: Fly) -> None:

@@ -121,3 +121,19 @@ def test_an_accelerating_autopilot_speeds_up_brakes_onto_its_target_and_stops_be
     assert back[-1].heading_rad != EAST
     with pytest.raises(ConfigError):
         VehicleParams(accel_mps2=-1.0)
+
+
+def test_a_speed_asked_below_the_cruise_is_kept_and_reached_by_braking() -> None:
+    # MAV_CMD_DO_CHANGE_SPEED: a rover cruising at 3 m/s asked for 2 m/s
+    far = (100.0, 0.0)
+    instant = step(VehicleState(0.0, 0.0, EAST), far, VehicleParams(speed_mps=3.0), 0.1, (), 2.0)
+    assert instant.vx_mps == pytest.approx(2.0)
+    faster = step(VehicleState(0.0, 0.0, EAST), far, VehicleParams(speed_mps=3.0), 0.1, (), 5.0)
+    assert faster.vx_mps == pytest.approx(3.0)  # never faster than its cruise
+    braking, state = VehicleParams(speed_mps=3.0, accel_mps2=1.0), VehicleState(0.0, 0.0, EAST, vx_mps=3.0)
+    speeds = []
+    for _ in range(15):
+        state = step(state, far, braking, 0.1, (), 2.0)
+        speeds.append(state.vx_mps)
+    assert speeds[0] == pytest.approx(2.9)  # sheds 1 m/s/s
+    assert speeds[9:] == pytest.approx([2.0] * 6)
