@@ -224,16 +224,6 @@ class Search:
         target = self._lead.setpoint(t_s, *position, self._plan, hold=self._hold)
         return None if target is None else (target.x, target.y)
 
-    def speed_mps(self, cruise_mps: float) -> float:
-        """The guided speed to ask of a vehicle that cruises at ``cruise_mps``: at most
-        ``vehicle.max_search_speed_mps`` while it looks for the plume, where a faster leg covers more
-        of the area in the same time, and at most ``vehicle.max_speed_mps`` from the first odour on,
-        where the map, updated once a second on cells of a metre, needs the vehicle near the odour
-        (docs/search-steps.md, steps 48 and 49); never faster than ``cruise_mps``."""
-        v = self.config.vehicle
-        cap = v.max_search_speed_mps if self._mission.state is MissionState.FIND else v.max_speed_mps
-        return cruise_mps if cap <= 0.0 else min(cruise_mps, cap)
-
     @property
     def plan(self) -> tuple[Waypoint, ...]:
         """The mission's current waypoints, in the order it means to fly them (empty before the

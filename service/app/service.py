@@ -65,12 +65,11 @@ ROVER_TYPES = frozenset({10, 11})
 """MAV_TYPE of an ArduPilot Rover (ground rover, surface boat), whose parameters are asked for."""
 ROVER_PARAMS = ("WP_RADIUS", "WP_SPEED", "CRUISE_SPEED")
 """Asked of a Rover as the link comes up: its acceptance radius (logged), and the guided speed it
-drives at (``WP_SPEED``, or ``CRUISE_SPEED`` while that is 0), which ``vehicle.max_search_speed_mps``
-and ``vehicle.max_speed_mps`` cap."""
+drives at (``WP_SPEED``, or ``CRUISE_SPEED`` while that is 0), which ``vehicle.max_speed_mps`` caps."""
 PARAM_ASKS = 5
 """How many times (one a second) the parameters not yet answered are asked for."""
 SPEED_EVERY_S = 5.0
-"""While commanding, a speed asked is sent again this often: Rover applies it only to a guided
+"""While commanding, the speed cap is sent again this often: Rover applies it only to a guided
 target it is driving to, and forgets it when GUIDED is entered again."""
 
 
@@ -188,10 +187,9 @@ class Service:
         self._lag_warned = False
         self._params: dict[str, float] = {}
         """``ROVER_PARAMS`` as the autopilot answered them."""
-        self._guided_mps: float | None = None
-        """The guided speed of a Rover that drives faster than a speed cap (``Search.speed_mps``)."""
-        self._speed_sent: tuple[float, float] | None = None
-        """(time, speed) of the last speed asked since GUIDED was entered."""
+        self._speed_cap: float | None = None
+        """The guided speed asked of a Rover that drives faster than ``vehicle.max_speed_mps``."""
+        self._speed_sent: float | None = None
         self._signing_key = (
             load_signing_key(config.mavlink.signing_key_file) if config.mavlink.signing_key_file else None
         )
@@ -492,27 +490,11 @@ class Service:
         self.stats.setpoints += 1
         edges.recorder.write_setpoint(now, target.x, target.y, cfg.altitude_m)
         self._tell_radius(edges, now)
-        self._ask_speed(edges, system, now)
+        due = self._speed_sent is None or now - self._speed_sent >= SPEED_EVERY_S
+        if self._speed_cap is not None and due:
+            edges.link.send_speed(system, self._speed_cap)
+            self._speed_sent = now
         return True
-
-    def _ask_speed(self, edges: Edges, system: int, now: float) -> None:
-        """Ask a Rover faster than a cap for the search's speed (``Search.speed_mps``): at once when
-        that changes (plume found, a lone contact given up), and again every ``SPEED_EVERY_S``. Its
-        own speed is asked back only after a slower one was."""
-        guided = self._guided_mps
-        if guided is None:
-            return
-        wanted = self.search.speed_mps(guided)
-        sent = self._speed_sent
-        if sent is None:
-            if wanted >= guided:
-                return
-        elif sent[1] == wanted and (wanted >= guided or now - sent[0] < SPEED_EVERY_S):
-            return
-        edges.link.send_speed(system, wanted)
-        self._speed_sent = (now, wanted)
-        if sent is None or sent[1] != wanted:
-            log.info("asked the autopilot for %.1f m/s (%s)", wanted, self.search.state)
 
     def _ask_params(self, link: VehicleLink) -> None:
         """Ask an ArduPilot Rover for ``ROVER_PARAMS`` not yet answered, once a second
@@ -551,31 +533,20 @@ class Service:
 
     def _cap_speed(self, edges: Edges, now: float) -> None:
         """Once the Rover's guided speed is known (``WP_SPEED``, or ``CRUISE_SPEED`` while it is 0):
-        if it is faster than either cap, ask for the search's speed while commanding
-        (``_ask_speed``). The map is updated once a second on cells of a metre or so: at 5 m/s
-        (SITL's CRUISE_SPEED) the search reaches sources and fails to name them (step 48), while
-        plume-finding legs flown at 3 m/s find the plume sooner (step 49). A slower vehicle is never
-        sped up."""
-        v = self.config.vehicle
-        if self._guided_mps is not None:
-            return
+        if it is faster than ``vehicle.max_speed_mps``, ask for that speed while commanding. The
+        map is updated once a second on cells of a metre or so, and the search was measured at
+        0.5-2 m/s; at 5 m/s (SITL's CRUISE_SPEED) it reaches sources and fails to name them (step
+        48). A slower vehicle is never sped up."""
+        cap = self.config.vehicle.max_speed_mps
         wp_speed = self._params.get("WP_SPEED")
         speed = wp_speed if wp_speed else self._params.get("CRUISE_SPEED")
-        caps = [cap for cap in (v.max_search_speed_mps, v.max_speed_mps) if cap > 0.0]
-        if wp_speed is None or speed is None or not any(speed > cap for cap in caps):
+        if wp_speed is None or speed is None or cap <= 0.0 or speed <= cap:
             return
-        self._guided_mps = speed
-        search_mps = min(speed, v.max_search_speed_mps or speed)
-        trace_mps = min(speed, v.max_speed_mps or speed)
-        text = (
-            f"autopilot drives at {speed:.1f} m/s in GUIDED: asking for {search_mps:.1f} m/s while looking"
-            f" for the plume and {trace_mps:.1f} m/s from the first odour on"
-            " (vehicle.max_search_speed_mps, vehicle.max_speed_mps)"
-        )
+        self._speed_cap = cap
+        text = f"autopilot drives at {speed:.1f} m/s in GUIDED: asked for {cap:.1f} m/s"
+        text += " (vehicle.max_speed_mps)"
         log.warning("%s", text)
-        edges.recorder.write_event(
-            now, "speed_cap", text, speed_mps=speed, search_mps=search_mps, trace_mps=trace_mps
-        )
+        edges.recorder.write_event(now, "speed_cap", text, speed_mps=speed, cap_mps=cap)
 
     def _tell_radius(self, edges: Edges, now: float) -> None:
         """Say once (and again if it grows) that the autopilot stops short of its targets."""

@@ -31,12 +31,9 @@ class VehicleConfig(_Section):
     ``declaration.final_probability`` says, stating the map's mass within ``declaration.radius_m``
     of it as its confidence (``oslim bench suite`` passes each world's time limit)."""
     max_speed_mps: float = Field(default=2.0, ge=0, le=100)
-    """The fastest guided speed the search asks of an ArduPilot Rover from the first odour on
-    (MAV_CMD_DO_CHANGE_SPEED while commanding, when its ``WP_SPEED``, or ``CRUISE_SPEED`` while that
-    is 0, is faster); a slower vehicle is never sped up. 0: no cap."""
-    max_search_speed_mps: float = Field(default=3.0, ge=0, le=100)
-    """The same while it looks for the plume: legs flown faster cover more of the area in the same
-    time; a slow sensor reads a plume crossed too fast weakly. 0: no cap."""
+    """The fastest guided speed the search asks of an ArduPilot Rover (MAV_CMD_DO_CHANGE_SPEED
+    while commanding, when its ``WP_SPEED``, or ``CRUISE_SPEED`` while that is 0, is faster); a
+    slower vehicle is never sped up. 0: never asked."""
 
 
 class MavlinkConfig(_Section):

@@ -88,26 +88,6 @@ def test_a_tick_fuses_mean_flow_and_peak_reading_at_the_last_position() -> None:
     assert (step.estimate.x, step.estimate.y) == (estimate.x, estimate.y)
 
 
-def tick_at(search: Search, t: float, reading: float) -> None:
-    search.add_position(t - 0.5, 10.0, 0.0)
-    search.add_flow(t - 0.5, 1.0, 0.0)
-    search.add_chemical(t - 0.5, reading)
-    search.tick(t)
-
-
-def test_the_speed_asked_is_the_search_cap_until_the_first_odour_then_the_trace_cap() -> None:
-    search = Search(Config())  # vehicle.max_search_speed_mps 3, vehicle.max_speed_mps 2
-    assert (search.speed_mps(5.0), search.speed_mps(2.5), search.speed_mps(1.0)) == (3.0, 2.5, 1.0)
-    tick_at(search, 1.0, 0.0)
-    assert search.state == "search"
-    assert search.speed_mps(5.0) == 3.0
-    tick_at(search, 2.0, 1.5)
-    assert search.state == "trace"
-    assert (search.speed_mps(5.0), search.speed_mps(2.5), search.speed_mps(1.0)) == (2.0, 2.0, 1.0)
-    uncapped = Search(load_config(None, ["vehicle.max_search_speed_mps=0", "vehicle.max_speed_mps=0"]))
-    assert uncapped.speed_mps(5.0) == 5.0
-
-
 def test_the_heading_follows_the_track_unless_given() -> None:
     search = Search(Config())
     search.add_position(0.0, 10.0, 0.0)

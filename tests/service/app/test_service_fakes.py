@@ -13,7 +13,7 @@ import pytest
 
 from service.api import Search
 from service.app.edges import Edges
-from service.app.service import PARAM_ASKS, ROVER_PARAMS, SPEED_EVERY_S, STREAMS, Clock, Service
+from service.app.service import PARAM_ASKS, ROVER_PARAMS, STREAMS, Clock, Service
 from service.core.config import Config, build_config
 from service.core.errors import LinkError
 from service.core.observation import Observation
@@ -22,7 +22,7 @@ from service.core.planning.lead import STALL_S
 from service.edges.foxglove_scene import VEHICLE_TOPIC
 from service.edges.mavlink_link import LinkCounters
 from service.edges.signing import SigningCounters
-from service.edges.telemetry import Heartbeat, ParamValue
+from service.edges.telemetry import Heartbeat
 
 SPEED = 40.0  # service seconds per wall second: a 1 s tick every 25 ms
 ARMED = 128  # MAV_MODE_FLAG_SAFETY_ARMED
@@ -396,49 +396,14 @@ def test_an_autopilot_that_never_answers_is_asked_a_few_times() -> None:
 
 
 def test_a_rover_at_sitl_cruise_speed_is_asked_to_slow_down_while_commanded() -> None:
-    # SITL's rover.parm: WP_SPEED 0, so guided targets are driven at CRUISE_SPEED 5 m/s; the vehicle
-    # drives through odour from the first tick, so the service asks for vehicle.max_speed_mps
-    # (2 m/s) with every setpoint stream, again every SPEED_EVERY_S
+    # SITL's rover.parm: WP_SPEED 0, so guided targets are driven at CRUISE_SPEED 5 m/s; the service
+    # asks for vehicle.max_speed_mps (2 m/s) with every setpoint stream, again every SPEED_EVERY_S
     answers = {"WP_RADIUS": 3.0, "WP_SPEED": 0.0, "CRUISE_SPEED": 5.0}
     link, recorder, _ = run_with_vehicle(16.0, answer_after=1, answers=answers)
     sent = link.of("speed")
     assert len(sent) >= 2
     assert set(sent) == {(1, 2.0)}
     assert recorder.events.count("speed_cap") == 1
-
-
-def test_the_speed_asked_follows_the_mission_search_cap_then_trace_cap_at_once() -> None:
-    config = Config()  # max_search_speed_mps 3, max_speed_mps 2
-    link, _, recorder, edges = fakes()
-    service = guided_service(config, edges)
-    search = service.search
-    for name, value in {"WP_SPEED": 0.0, "CRUISE_SPEED": 5.0}.items():
-        service._on_param(edges, ParamValue(0.1, 1, name, value))
-    assert recorder.events.count("speed_cap") == 1
-
-    def tick(t: float, reading: float) -> None:
-        search.add_position(t - 0.5, 50.0, 0.0)
-        search.add_flow(t - 0.5, 1.0, 0.0)
-        search.add_chemical(t - 0.5, reading)
-        service._tick(edges, t, 0.0)
-
-    tick(1.0, 0.0)
-    assert search.state == "search"
-    for t in (1.5, 2.0, 2.5):
-        assert service._command(edges, t)
-    assert link.of("speed") == [(1, 3.0)]  # once, not with every setpoint
-    tick(3.0, 2.0)  # odour: tracing
-    assert search.state == "trace"
-    assert link.of("speed")[-1] == (1, 2.0)  # at once, not SPEED_EVERY_S later
-    service._command(edges, 3.0 + SPEED_EVERY_S)
-    assert link.of("speed") == [(1, 3.0), (1, 2.0), (1, 2.0)]  # and again every SPEED_EVERY_S
-    service.gate.heard(Heartbeat(9.0, 1, 1, 10, 3, 0, armed=True))  # the pilot takes it out of GUIDED
-    service._update_gate(edges, 9.0)
-    assert not service._command(edges, 9.5)
-    service.gate.heard(Heartbeat(10.0, 1, 1, 10, 3, config.mavlink.guided_mode, armed=True))
-    service._update_gate(edges, 10.0)
-    assert service._command(edges, 10.5)
-    assert link.of("speed")[3:] == [(1, 2.0)]  # GUIDED entered again forgets the speed: asked at once
 
 
 @pytest.mark.parametrize(
