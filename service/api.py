@@ -224,6 +224,13 @@ class Search:
         target = self._lead.setpoint(t_s, *position, self._plan, hold=self._hold)
         return None if target is None else (target.x, target.y)
 
+    def speed_mps(self, cruise_mps: float) -> float:
+        """The guided speed the service asks of a vehicle that cruises at ``cruise_mps``: at most
+        ``vehicle.max_speed_mps`` (0: no cap), never faster than its cruise. The map is updated once
+        a second on cells of a metre (docs/search-steps.md, steps 48 and 49)."""
+        cap = self.config.vehicle.max_speed_mps
+        return cruise_mps if cap <= 0.0 else min(cruise_mps, cap)
+
     @property
     def plan(self) -> tuple[Waypoint, ...]:
         """The mission's current waypoints, in the order it means to fly them (empty before the

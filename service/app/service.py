@@ -537,10 +537,12 @@ class Service:
         map is updated once a second on cells of a metre or so, and the search was measured at
         0.5-2 m/s; at 5 m/s (SITL's CRUISE_SPEED) it reaches sources and fails to name them (step
         48). A slower vehicle is never sped up."""
-        cap = self.config.vehicle.max_speed_mps
         wp_speed = self._params.get("WP_SPEED")
         speed = wp_speed if wp_speed else self._params.get("CRUISE_SPEED")
-        if wp_speed is None or speed is None or cap <= 0.0 or speed <= cap:
+        if self._speed_cap is not None or wp_speed is None or speed is None:
+            return
+        cap = self.search.speed_mps(speed)
+        if cap >= speed:
             return
         self._speed_cap = cap
         text = f"autopilot drives at {speed:.1f} m/s in GUIDED: asked for {cap:.1f} m/s"

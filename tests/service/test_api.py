@@ -88,6 +88,12 @@ def test_a_tick_fuses_mean_flow_and_peak_reading_at_the_last_position() -> None:
     assert (step.estimate.x, step.estimate.y) == (estimate.x, estimate.y)
 
 
+def test_the_speed_asked_is_the_cap_never_faster_than_the_cruise() -> None:
+    search = Search(Config())  # vehicle.max_speed_mps 2
+    assert (search.speed_mps(5.0), search.speed_mps(2.0), search.speed_mps(1.0)) == (2.0, 2.0, 1.0)
+    assert Search(load_config(None, ["vehicle.max_speed_mps=0"])).speed_mps(5.0) == 5.0
+
+
 def test_the_heading_follows_the_track_unless_given() -> None:
     search = Search(Config())
     search.add_position(0.0, 10.0, 0.0)

@@ -242,6 +242,8 @@ def run_mission(
         if step is None:  # cannot happen with every stream sampled; kept for a sampling rate < 1/tick
             continue
         world.target_m = search.setpoint(world.time_s, believed)
+        # the speed the service asks of an ArduPilot Rover that cruises faster (MAV_CMD_DO_CHANGE_SPEED)
+        world.speed_mps = search.speed_mps(world.vehicle_params.speed_mps)
         if on_tick is not None:
             on_tick(search, step)
         if step.detected and first_detection is None:
