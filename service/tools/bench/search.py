@@ -39,6 +39,7 @@ from service.core.grid import Grid
 from service.core.mapping.belief import FloatArray
 from service.core.mission import MissionState
 from service.tools.bench.workers import in_order
+from sim_bridge.autopilot import VehicleKind
 from sim_bridge.scenarios import Scenario, build_world, load_scenario, place
 
 DEFAULT_MAX_TIME_S = 300.0
@@ -212,6 +213,7 @@ def run_mission(
     sample_every = max(1, round(1.0 / (config.mavlink.stream_hz * world.dt_s)))
     command_every = max(1, round(1.0 / (config.mavlink.setpoint_rate_hz * world.dt_s)))
     world.driving = True
+    capped = scenario.world.vehicle.kind is VehicleKind.ROVER  # the service caps Rovers only (ROVER_TYPES)
 
     path_m = 0.0
     step_count = 0
@@ -242,8 +244,8 @@ def run_mission(
         if step is None:  # cannot happen with every stream sampled; kept for a sampling rate < 1/tick
             continue
         world.target_m = search.setpoint(world.time_s, believed)
-        # the speed the service asks of an ArduPilot Rover that cruises faster (MAV_CMD_DO_CHANGE_SPEED)
-        world.speed_mps = search.speed_mps(world.vehicle_params.speed_mps)
+        if capped:  # the speed the service asks of an ArduPilot Rover that cruises faster
+            world.speed_mps = search.speed_mps(world.vehicle_params.speed_mps)
         if on_tick is not None:
             on_tick(search, step)
         if step.detected and first_detection is None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from pathlib import Path
@@ -178,6 +179,24 @@ def test_a_vehicle_that_stops_short_of_its_targets_still_declares(
     assert r.correct
     if radius_m >= 1.0:  # learnt from its stops: a little short, or long by a pivot inside the watch
         assert radius_m - 0.3 <= radii[-1] <= radius_m + 0.5
+
+
+def test_a_rover_faster_than_the_cap_is_driven_at_the_speed_the_service_asks() -> None:
+    # the wang rover cruising at 4 m/s: the service would ask an ArduPilot Rover for
+    # vehicle.max_speed_mps (2 m/s, MAV_CMD_DO_CHANGE_SPEED), and the bench flies it so
+    def fastest_tick(cap: str) -> float:
+        fast = search.configure("wang-laminar", "pomdp", "astar", ["world.vehicle.speed_mps=4", cap])
+        track: list[tuple[float, float]] = []
+        run_mission(
+            fast,
+            0,
+            max_time_s=60.0,
+            on_tick=lambda s, step: track.append((step.observation.x, step.observation.y)),
+        )
+        return max(math.dist(a, b) for a, b in itertools.pairwise(track))
+
+    assert 1.9 <= fastest_tick("vehicle.max_speed_mps=2") <= 2.0 + 1e-6
+    assert fastest_tick("vehicle.max_speed_mps=0") > 3.9  # no cap: its own 4 m/s
 
 
 def test_command_prints_one_json_object_per_configuration(capsys: pytest.CaptureFixture[str]) -> None:
