@@ -28,8 +28,9 @@ class Autopilot:
     """Mode at boot (ArduPilot's INITIAL_MODE default)."""
     radius_param: str | None = None
     """The parameter within which a guided target counts as reached (Rover's WP_RADIUS); the stub
-    answers PARAM_REQUEST_READ of it with the world's arrival radius. None: the vehicle drives onto
-    its targets and has no such parameter."""
+    answers PARAM_REQUEST_READ of it with the world's arrival radius, and of WP_SPEED and
+    CRUISE_SPEED with the cruise speed. None: the vehicle drives onto its targets and has none of
+    these parameters."""
 
     def mode_name(self, custom_mode: int) -> str:
         return self.modes.get(custom_mode, f"MODE({custom_mode})")

@@ -412,7 +412,7 @@ def draw_scenario(world_class: WorldClass, seed: int, config: Config | None = No
             "heading_deg": draw.value((0.0, 360.0)) - 180.0,
             "speed_mps": speed,
             "max_turn_rate_dps": 30.0 if auv else 90.0,
-            "pivot_angle_deg": 180.0,
+            "pivot_angle_deg": 180.0,  # an AUV never pivots; a rover's is drawn last, below
             "slows_to_turn": auv,
         },
         "detector": {

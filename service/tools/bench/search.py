@@ -213,7 +213,9 @@ def run_mission(
     sample_every = max(1, round(1.0 / (config.mavlink.stream_hz * world.dt_s)))
     command_every = max(1, round(1.0 / (config.mavlink.setpoint_rate_hz * world.dt_s)))
     world.driving = True
-    capped = scenario.world.vehicle.kind is VehicleKind.ROVER  # the service caps Rovers only (ROVER_TYPES)
+    if scenario.world.vehicle.kind is VehicleKind.ROVER:  # the service caps Rovers only (ROVER_TYPES)
+        # the speed it asks of an ArduPilot Rover that cruises faster, with its first setpoint
+        world.speed_mps = search.speed_mps(world.vehicle_params.speed_mps)
 
     path_m = 0.0
     step_count = 0
@@ -244,8 +246,6 @@ def run_mission(
         if step is None:  # cannot happen with every stream sampled; kept for a sampling rate < 1/tick
             continue
         world.target_m = search.setpoint(world.time_s, believed)
-        if capped:  # the speed the service asks of an ArduPilot Rover that cruises faster
-            world.speed_mps = search.speed_mps(world.vehicle_params.speed_mps)
         if on_tick is not None:
             on_tick(search, step)
         if step.detected and first_detection is None:
